@@ -1,0 +1,96 @@
+//! Correspondence files of the shape-matching benchmarks: `.vts` (a list of
+//! vertex indices) and `.map` (a target vertex for every source vertex).
+//! Both are 1-based on disk and 0-based in memory; this module is the only
+//! place that converts.
+
+use std::fs;
+use std::io::{self, Write};
+use std::path::Path;
+
+use crate::error::{Error, Location, Result, parse_err};
+
+/// Parses a list of 1-based vertex indices, one per line, into 0-based
+/// indices. Blank lines and `#` comments are skipped; a 0, a negative value,
+/// a non-integer or two values on one line are errors naming the line.
+///
+/// `format` names the file kind in error messages (".vts", ".map").
+pub fn parse_index_list(data: &[u8], format: &'static str) -> Result<Vec<usize>> {
+    let mut out = Vec::with_capacity(data.len() / 4);
+    for item in crate::text::content_lines(data, format) {
+        let (line, text) = item?;
+        let loc = Location::Line(line);
+        let mut toks = text.split_ascii_whitespace();
+        let tok = toks.next().unwrap_or("");
+        if toks.next().is_some() {
+            return Err(parse_err(format, loc, "expected one vertex index per line"));
+        }
+        let i: i64 = tok
+            .parse()
+            .map_err(|_| parse_err(format, loc, format!("'{tok}' is not an integer vertex index")))?;
+        if i < 1 {
+            return Err(parse_err(format, loc, format!("vertex index {i} is not a 1-based index (must be >= 1)")));
+        }
+        out.push((i - 1) as usize);
+    }
+    Ok(out)
+}
+
+fn read_list(path: &Path, format: &'static str) -> Result<Vec<usize>> {
+    let data = fs::read(path).map_err(|e| Error::io(path, e))?;
+    parse_index_list(&data, format).map_err(|e| e.with_path(path))
+}
+
+/// Reads a `.vts` file: for line i, the 0-based vertex of this shape that is
+/// ground-truth point i of the collection.
+pub fn read_vts(path: impl AsRef<Path>) -> Result<Vec<usize>> {
+    read_list(path.as_ref(), ".vts")
+}
+
+/// Reads a `.map` file `A_B.map`: for every vertex of A (line i), the
+/// 0-based vertex of B it maps to. Check the result against the sizes of A
+/// and B with [`check_indices`].
+pub fn read_map(path: impl AsRef<Path>) -> Result<Vec<usize>> {
+    read_list(path.as_ref(), ".map")
+}
+
+/// Checks that every 0-based index is below `n_vertices`; the error names
+/// the 1-based line and index as written in the file.
+pub fn check_indices(indices: &[usize], n_vertices: usize, path: Option<&Path>) -> Result<()> {
+    match indices.iter().position(|&i| i >= n_vertices) {
+        None => Ok(()),
+        Some(line0) => Err(Error::IndexOutOfRange {
+            path: path.map(Path::to_path_buf),
+            line: line0 + 1,
+            index: indices[line0] + 1,
+            n_vertices,
+        }),
+    }
+}
+
+/// Writes 0-based indices as a 1-based list, one per line.
+pub fn write_index_list<W: Write>(w: &mut W, indices: &[usize]) -> io::Result<()> {
+    let mut s = String::with_capacity(indices.len() * 6);
+    for &i in indices {
+        s.push_str(&(i + 1).to_string());
+        s.push('\n');
+    }
+    w.write_all(s.as_bytes())
+}
+
+fn write_list(path: &Path, indices: &[usize]) -> Result<()> {
+    let mut f = io::BufWriter::new(fs::File::create(path).map_err(|e| Error::io(path, e))?);
+    write_index_list(&mut f, indices)
+        .and_then(|()| f.flush())
+        .map_err(|e| Error::io(path, e))
+}
+
+/// Writes a point map (for every source vertex, a 0-based target vertex) as
+/// a 1-based `.map` file.
+pub fn write_map(path: impl AsRef<Path>, t_ab: &[usize]) -> Result<()> {
+    write_list(path.as_ref(), t_ab)
+}
+
+/// Writes 0-based vertex indices as a 1-based `.vts` file.
+pub fn write_vts(path: impl AsRef<Path>, indices: &[usize]) -> Result<()> {
+    write_list(path.as_ref(), indices)
+}

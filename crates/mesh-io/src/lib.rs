@@ -1,0 +1,298 @@
+//! Triangle meshes for shape matching: readers and writers for OFF, OBJ and
+//! PLY with errors that name the file and line, the `.vts`/`.map`
+//! correspondence files of the shape-matching benchmarks, and a validation
+//! report (degenerate and duplicate faces, non-manifold elements, boundary
+//! loops, components, genus).
+//!
+//! Indices are 0-based everywhere in this API. The benchmark files `.vts`
+//! and `.map` are 1-based by convention; they are converted here, on the way
+//! in and out, and nowhere else.
+//!
+//! ```
+//! use fmaps_mesh_io::{parse_off, write_off, TriMesh};
+//!
+//! let text = "OFF\n4 4 0\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n3 0 2 1\n3 0 1 3\n3 0 3 2\n3 1 2 3\n";
+//! let mesh = parse_off(text.as_bytes())?;
+//! assert_eq!((mesh.n_vertices(), mesh.n_faces()), (4, 4));
+//!
+//! let report = mesh.validate();
+//! assert!(report.is_closed_manifold());
+//! assert_eq!(report.euler_characteristic, 2);
+//! assert_eq!(report.genus, Some(0));
+//!
+//! let mut bytes = Vec::new();
+//! write_off(&mut bytes, &mesh)?;
+//! assert_eq!(parse_off(&bytes)?, mesh);
+//! # Ok::<(), fmaps_mesh_io::Error>(())
+//! ```
+//!
+//! # Formats
+//!
+//! | format | read | write |
+//! | --- | --- | --- |
+//! | OFF | ASCII; `#` comments, blank lines, counts on the header line or the next, `C`/`N`/`ST` variants (extra columns ignored), polygons fan-triangulated | ASCII, shortest round-trip decimal |
+//! | PLY | ASCII, binary little and big endian; any scalar type for `x y z`; any list type for `vertex_indices`/`vertex_index`; other properties and elements skipped; polygons fan-triangulated | binary little endian, `double` coordinates |
+//! | OBJ | `v` and `f` (with `v/vt/vn`, negative relative indices), polygons fan-triangulated, everything else ignored; **vertex order preserved** | ASCII |
+//!
+//! OBJ is parsed here rather than with `tobj` because `tobj` renumbers
+//! vertices in order of first use and drops unreferenced ones, which breaks
+//! `.vts` ground truth that indexes the file's vertex order; it also reports
+//! no line numbers. The tests check this reader against `tobj` on geometry.
+//!
+//! # Features
+//!
+//! - `serde`: derives `Serialize` for [`MeshReport`].
+#![deny(missing_docs)]
+
+mod corres;
+mod error;
+pub mod generate;
+mod obj;
+mod off;
+mod ply;
+mod validate;
+
+use std::fs;
+use std::io::{BufWriter, Write};
+use std::path::Path;
+
+pub use corres::{
+    check_indices, parse_index_list, read_map, read_vts, write_index_list, write_map, write_vts,
+};
+pub use error::{Error, Location, MeshProblem, Result};
+pub use obj::{parse_obj, write_obj};
+pub use off::{parse_off, write_off};
+pub use ply::{parse_ply, write_ply};
+pub use validate::MeshReport;
+
+/// A triangle mesh: vertex positions and triangles of 0-based vertex indices.
+///
+/// Invariants (checked by [`TriMesh::new`] and by every reader): at least
+/// one vertex and one face, all coordinates finite, every face index smaller
+/// than the number of vertices. Faces may still be degenerate or duplicated;
+/// [`TriMesh::validate`] reports those.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TriMesh {
+    vertices: Vec<[f64; 3]>,
+    faces: Vec<[usize; 3]>,
+}
+
+impl TriMesh {
+    /// Builds a mesh from vertex positions and triangles, checking the
+    /// invariants of the type.
+    pub fn new(vertices: Vec<[f64; 3]>, faces: Vec<[usize; 3]>) -> Result<Self> {
+        if vertices.is_empty() || faces.is_empty() {
+            return Err(Error::InvalidMesh {
+                path: None,
+                problem: MeshProblem::Empty {
+                    n_vertices: vertices.len(),
+                    n_faces: faces.len(),
+                },
+            });
+        }
+        for (vertex, p) in vertices.iter().enumerate() {
+            if let Some(&value) = p.iter().find(|c| !c.is_finite()) {
+                return Err(Error::InvalidMesh {
+                    path: None,
+                    problem: MeshProblem::NonFiniteVertex { vertex, value },
+                });
+            }
+        }
+        let n_vertices = vertices.len();
+        for (face, f) in faces.iter().enumerate() {
+            if let Some(&index) = f.iter().find(|&&i| i >= n_vertices) {
+                return Err(Error::InvalidMesh {
+                    path: None,
+                    problem: MeshProblem::FaceIndexOutOfRange {
+                        face,
+                        index,
+                        n_vertices,
+                    },
+                });
+            }
+        }
+        Ok(Self { vertices, faces })
+    }
+
+    /// Vertex positions (n x 3).
+    pub fn vertices(&self) -> &[[f64; 3]] {
+        &self.vertices
+    }
+
+    /// Triangles as 0-based vertex indices, counter-clockwise seen from
+    /// outside for a consistently oriented mesh.
+    pub fn faces(&self) -> &[[usize; 3]] {
+        &self.faces
+    }
+
+    /// Number of vertices.
+    pub fn n_vertices(&self) -> usize {
+        self.vertices.len()
+    }
+
+    /// Number of triangles.
+    pub fn n_faces(&self) -> usize {
+        self.faces.len()
+    }
+
+    /// Gives back the vertex and face arrays.
+    pub fn into_parts(self) -> (Vec<[f64; 3]>, Vec<[usize; 3]>) {
+        (self.vertices, self.faces)
+    }
+
+    /// Area of every triangle (half the norm of the edge cross product).
+    pub fn face_areas(&self) -> Vec<f64> {
+        self.faces
+            .iter()
+            .map(|f| {
+                let [a, b, c] = f.map(|i| self.vertices[i]);
+                0.5 * norm(cross(sub(b, a), sub(c, a)))
+            })
+            .collect()
+    }
+
+    /// Total surface area.
+    pub fn area(&self) -> f64 {
+        self.face_areas().iter().sum()
+    }
+
+    /// Checks the mesh and returns a report of its combinatorics and defects.
+    pub fn validate(&self) -> MeshReport {
+        validate::report(self)
+    }
+}
+
+/// The mesh formats this crate reads and writes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[non_exhaustive]
+pub enum Format {
+    /// Object File Format (ASCII).
+    Off,
+    /// Wavefront OBJ.
+    Obj,
+    /// Stanford PLY.
+    Ply,
+}
+
+impl Format {
+    /// The format a path's extension names (case-insensitive).
+    pub fn from_path(path: &Path) -> Result<Self> {
+        let ext = path
+            .extension()
+            .and_then(|e| e.to_str())
+            .map(str::to_ascii_lowercase);
+        match ext.as_deref() {
+            Some("off") => Ok(Format::Off),
+            Some("obj") => Ok(Format::Obj),
+            Some("ply") => Ok(Format::Ply),
+            _ => Err(Error::UnknownFormat {
+                path: path.to_path_buf(),
+                ext,
+            }),
+        }
+    }
+}
+
+/// Parses mesh bytes in the given format.
+pub fn parse_mesh(data: &[u8], format: Format) -> Result<TriMesh> {
+    match format {
+        Format::Off => parse_off(data),
+        Format::Obj => parse_obj(data),
+        Format::Ply => parse_ply(data),
+    }
+}
+
+/// Reads a mesh file, choosing the format from its extension
+/// (`.off`, `.obj`, `.ply`). Errors name the file.
+pub fn read_mesh(path: impl AsRef<Path>) -> Result<TriMesh> {
+    let path = path.as_ref();
+    let format = Format::from_path(path)?;
+    let data = fs::read(path).map_err(|e| Error::io(path, e))?;
+    parse_mesh(&data, format).map_err(|e| e.with_path(path))
+}
+
+/// Writes a mesh, choosing the format from the extension of `path`
+/// (OFF as ASCII, PLY as binary little endian, OBJ as ASCII).
+pub fn write_mesh(path: impl AsRef<Path>, mesh: &TriMesh) -> Result<()> {
+    let path = path.as_ref();
+    let format = Format::from_path(path)?;
+    let file = fs::File::create(path).map_err(|e| Error::io(path, e))?;
+    let mut w = BufWriter::new(file);
+    let result = match format {
+        Format::Off => write_off(&mut w, mesh),
+        Format::Obj => write_obj(&mut w, mesh),
+        Format::Ply => write_ply(&mut w, mesh),
+    };
+    result
+        .and_then(|()| w.flush())
+        .map_err(|e| Error::io(path, e))
+}
+
+pub(crate) fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
+}
+
+pub(crate) fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    [
+        a[1] * b[2] - a[2] * b[1],
+        a[2] * b[0] - a[0] * b[2],
+        a[0] * b[1] - a[1] * b[0],
+    ]
+}
+
+pub(crate) fn norm(a: [f64; 3]) -> f64 {
+    (a[0] * a[0] + a[1] * a[1] + a[2] * a[2]).sqrt()
+}
+
+/// Shared helpers of the text parsers.
+pub(crate) mod text {
+    use crate::error::{Error, Location, parse_err};
+
+    /// Iterates over the lines of `data` as `(1-based line number, content)`
+    /// with `#` comments and surrounding whitespace removed, skipping lines
+    /// that are then empty. Non-UTF-8 lines are an error.
+    pub(crate) fn content_lines<'a>(
+        data: &'a [u8],
+        format: &'static str,
+    ) -> impl Iterator<Item = Result<(usize, &'a str), Error>> + 'a {
+        data.split(|&b| b == b'\n')
+            .enumerate()
+            .filter_map(move |(i, raw)| {
+                let line = i + 1;
+                let text = match std::str::from_utf8(raw) {
+                    Ok(t) => t,
+                    Err(_) => {
+                        return Some(Err(parse_err(
+                            format,
+                            Location::Line(line),
+                            "not valid UTF-8 text (binary data in a text format?)",
+                        )));
+                    }
+                };
+                let text = text.split('#').next().unwrap_or("").trim();
+                (!text.is_empty()).then_some(Ok((line, text)))
+            })
+    }
+
+    /// Parses a finite coordinate.
+    pub(crate) fn coord(tok: &str, format: &'static str, line: usize, vertex: usize) -> Result<f64, Error> {
+        let v: f64 = tok.parse().map_err(|_| {
+            parse_err(format, Location::Line(line), format!("vertex {vertex}: '{tok}' is not a number"))
+        })?;
+        if !v.is_finite() {
+            return Err(parse_err(
+                format,
+                Location::Line(line),
+                format!("vertex {vertex} has a non-finite coordinate '{tok}'"),
+            ));
+        }
+        Ok(v)
+    }
+
+    /// Fan-triangulates a polygon into `out`.
+    pub(crate) fn fan(poly: &[usize], out: &mut Vec<[usize; 3]>) {
+        for j in 1..poly.len() - 1 {
+            out.push([poly[0], poly[j], poly[j + 1]]);
+        }
+    }
+}
