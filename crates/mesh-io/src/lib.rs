@@ -21,7 +21,7 @@
 //! assert_eq!(report.genus, Some(0));
 //!
 //! let mut bytes = Vec::new();
-//! write_off(&mut bytes, &mesh)?;
+//! write_off(&mut bytes, &mesh).expect("writing to a Vec cannot fail");
 //! assert_eq!(parse_off(&bytes)?, mesh);
 //! # Ok::<(), fmaps_mesh_io::Error>(())
 //! ```
