@@ -1,0 +1,98 @@
+//! Checks shared by all backends: residuals, M-orthonormality, sign
+//! normalization, and a small deterministic random generator.
+
+use faer::linalg::matmul::matmul;
+use faer::{Accum, MatRef};
+use nalgebra::{DMatrix, DVector};
+
+use crate::EigenProblem;
+
+/// `‖Lφᵢ − λᵢMφᵢ‖_{M⁻¹}` for every column.
+pub(crate) fn residuals(problem: &EigenProblem<'_>, lambda: &DVector<f64>, phi: &DMatrix<f64>) -> Vec<f64> {
+    let n = problem.n();
+    let k = phi.ncols();
+    let l = problem.stiffness();
+    let m = problem.mass();
+    let mut out = Vec::with_capacity(k);
+    let mut lp = vec![0.0; n];
+    for c in 0..k {
+        let x = phi.column(c);
+        lp.iter_mut().for_each(|v| *v = 0.0);
+        // For a symmetric matrix, CSC and CSR storage give the same product
+        // when the outer index is treated as the column.
+        for (j, lane) in l.outer_iterator().enumerate() {
+            let xj = x[j];
+            for (i, &v) in lane.iter() {
+                lp[i] += v * xj;
+            }
+        }
+        let mut s = 0.0;
+        for i in 0..n {
+            let r = lp[i] - lambda[c] * m[i] * x[i];
+            s += r * r / m[i];
+        }
+        out.push(s.sqrt());
+    }
+    out
+}
+
+/// `max |ΦᵀMΦ − I|`.
+pub(crate) fn orthonormality_error(mass: &[f64], phi: &DMatrix<f64>, threads: usize) -> f64 {
+    let n = phi.nrows();
+    let k = phi.ncols();
+    let mut mphi = phi.clone();
+    for mut col in mphi.column_iter_mut() {
+        for (v, m) in col.iter_mut().zip(mass) {
+            *v *= m;
+        }
+    }
+    let a = MatRef::from_column_major_slice(phi.as_slice(), n, k);
+    let b = MatRef::from_column_major_slice(mphi.as_slice(), n, k);
+    let mut g = faer::Mat::<f64>::zeros(k, k);
+    matmul(&mut g, Accum::Replace, a.transpose(), b, 1.0, crate::factor::par_of(threads));
+    let mut e = 0.0f64;
+    for i in 0..k {
+        for j in 0..k {
+            let want = if i == j { 1.0 } else { 0.0 };
+            e = e.max((g[(i, j)] - want).abs());
+        }
+    }
+    e
+}
+
+/// Flips each column so that its entry of largest magnitude is positive
+/// (ties: the first such entry), making outputs comparable and
+/// deterministic.
+pub(crate) fn fix_signs(phi: &mut DMatrix<f64>) {
+    for mut col in phi.column_iter_mut() {
+        let mut best = 0.0f64;
+        let mut sign = 1.0;
+        for &v in col.iter() {
+            if v.abs() > best {
+                best = v.abs();
+                sign = v.signum();
+            }
+        }
+        if sign < 0.0 {
+            col.neg_mut();
+        }
+    }
+}
+
+/// SplitMix64: a tiny, seeded, portable generator for start vectors.
+pub(crate) struct SplitMix(pub u64);
+
+impl SplitMix {
+    pub(crate) fn next_u64(&mut self) -> u64 {
+        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        z ^ (z >> 31)
+    }
+
+    /// Uniform in [-1, 1).
+    pub(crate) fn next_f64(&mut self) -> f64 {
+        (self.next_u64() >> 11) as f64 / (1u64 << 52) as f64 - 1.0
+    }
+}
