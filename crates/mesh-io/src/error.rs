@@ -34,7 +34,7 @@ impl fmt::Display for Location {
 #[non_exhaustive]
 pub enum Error {
     /// The file could not be opened, read or written.
-    #[error("{}: {source}", path.display())]
+    #[error("{}: input/output error", path.display())]
     Io {
         /// The file.
         path: PathBuf,

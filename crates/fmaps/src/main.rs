@@ -1,0 +1,288 @@
+//! The `fmaps` command-line tool.
+
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+use std::time::Instant;
+
+use anyhow::Context;
+use clap::{Parser, Subcommand, ValueEnum};
+use fmaps::laplacian::MassKind;
+use fmaps::mesh_io::{self, TriMesh};
+use fmaps::{Backend, SpectrumParams};
+use serde_json::json;
+
+#[derive(Parser)]
+#[command(name = "fmaps", version, about = "Non-rigid 3D shape matching with functional maps")]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Validate a mesh: counts, defects, components, boundary, genus.
+    #[command(after_help = "Example:\n  fmaps info tr_reg_000.off --json")]
+    Info {
+        /// Mesh file (.off, .obj, .ply).
+        mesh: PathBuf,
+        /// Print one JSON object instead of text.
+        #[arg(long)]
+        json: bool,
+    },
+    /// The first k Laplace–Beltrami eigenpairs of a mesh (L φ = λ M φ).
+    #[command(after_help = "Examples:\n  fmaps spectrum --builtin sphere --k 36\n  fmaps spectrum tr_reg_000.off --k 100 --json --out basis.npy\n\n\
+--out FILE.npy writes the eigenvectors (n x k, float64), FILE_eigenvalues.npy (k) and FILE_mass.npy\n\
+(n, the lumped mass diagonal); in Python: phi = np.load('FILE.npy'), and phi.T @ (mass[:, None] * phi) = I.")]
+    Spectrum {
+        /// Mesh file (.off, .obj, .ply); omit with --builtin.
+        #[arg(required_unless_present = "builtin")]
+        mesh: Option<PathBuf>,
+        /// Use a generated mesh instead of a file: a unit sphere (10,242
+        /// vertices, exact eigenvalues l(l+1)) or a torus.
+        #[arg(long, value_enum, conflicts_with = "mesh")]
+        builtin: Option<Builtin>,
+        /// Number of eigenpairs.
+        #[arg(long, short = 'k', default_value_t = 100)]
+        k: usize,
+        /// Eigensolver backend.
+        #[arg(long, default_value = "native")]
+        backend: Backend,
+        /// Mass matrix.
+        #[arg(long, value_enum, default_value_t = Mass::Lumped)]
+        mass: Mass,
+        /// Threads for the eigensolver.
+        #[arg(long, default_value_t = 1)]
+        threads: usize,
+        /// Print one JSON object (eigenvalues in full precision).
+        #[arg(long)]
+        json: bool,
+        /// Write the basis as .npy (see below).
+        #[arg(long)]
+        out: Option<PathBuf>,
+    },
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+enum Builtin {
+    Sphere,
+    Torus,
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+enum Mass {
+    Lumped,
+    Voronoi,
+}
+
+/// Appends a line to an output buffer (printed at once by [`emit`], so a
+/// closed pipe never interrupts a half-written report).
+macro_rules! outln {
+    ($o:expr, $($t:tt)*) => {{
+        use std::fmt::Write as _;
+        let _ = writeln!($o, $($t)*);
+    }};
+}
+
+/// Prints a buffer; a closed pipe (`fmaps ... | head`) is not an error.
+fn emit(text: &str) -> Result<(), Failure> {
+    use std::io::Write as _;
+    let mut out = std::io::stdout().lock();
+    match out.write_all(text.as_bytes()).and_then(|()| out.flush()) {
+        Err(e) if e.kind() == std::io::ErrorKind::BrokenPipe => Ok(()),
+        r => r.map_err(runtime),
+    }
+}
+
+/// A failure with its exit code: 2 for bad input, 1 for a runtime failure.
+struct Failure(u8, anyhow::Error);
+
+fn input<E: Into<anyhow::Error>>(e: E) -> Failure {
+    Failure(2, e.into())
+}
+
+fn runtime<E: Into<anyhow::Error>>(e: E) -> Failure {
+    Failure(1, e.into())
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    let result = match cli.command {
+        Command::Info { mesh, json } => info(&mesh, json),
+        Command::Spectrum { mesh, builtin, k, backend, mass, threads, json, out } => {
+            spectrum(mesh.as_deref(), builtin, k, backend, mass, threads, json, out.as_deref())
+        }
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(Failure(code, e)) => {
+            eprintln!("error: {e:#}");
+            ExitCode::from(code)
+        }
+    }
+}
+
+fn load(path: &Path) -> Result<TriMesh, Failure> {
+    mesh_io::read_mesh(path).map_err(input)
+}
+
+fn info(path: &Path, json: bool) -> Result<(), Failure> {
+    let mesh = load(path)?;
+    let mut o = String::new();
+    let r = mesh.validate();
+    if json {
+        let mut v = serde_json::to_value(&r).map_err(runtime)?;
+        v["mesh"] = json!(path.display().to_string());
+        v["is_manifold"] = json!(r.is_manifold());
+        v["is_closed_manifold"] = json!(r.is_closed_manifold());
+        v["is_clean"] = json!(r.is_clean());
+        return emit(&format!("{}\n", serde_json::to_string_pretty(&v).map_err(runtime)?));
+    }
+    let list = |v: &[usize]| -> String {
+        if v.is_empty() {
+            "none".into()
+        } else {
+            let head: Vec<String> = v.iter().take(8).map(|x| x.to_string()).collect();
+            format!("{} ({}{})", v.len(), head.join(", "), if v.len() > 8 { ", ..." } else { "" })
+        }
+    };
+    outln!(o, "{}", path.display());
+    outln!(o, "  vertices {}  faces {}  edges {}", r.n_vertices, r.n_faces, r.n_edges);
+    outln!(o, "  area {:.6}  bounding box {:?} .. {:?}", r.area, r.bounding_box[0], r.bounding_box[1]);
+    outln!(o, "  connected components {}  boundary loops {} ({} edges)", r.connected_components, r.boundary_loops, r.boundary_edges);
+    outln!(o, 
+        "  Euler characteristic {}  genus {}",
+        r.euler_characteristic,
+        r.genus.map_or("undefined (not a manifold)".into(), |g| g.to_string())
+    );
+    outln!(o, "  degenerate faces {}", list(&r.degenerate_faces));
+    outln!(o, "  duplicate faces {}", list(&r.duplicate_faces));
+    outln!(o, "  non-manifold edges {}", r.non_manifold_edges.len());
+    outln!(o, "  non-manifold vertices {}", list(&r.non_manifold_vertices));
+    outln!(o, "  unreferenced vertices {}", list(&r.unreferenced_vertices));
+    outln!(o, "  inconsistently oriented edges {}", r.inconsistently_oriented_edges);
+    outln!(o, "  verdict: {}", if r.is_clean() { "clean manifold mesh" } else if r.is_manifold() { "manifold, with the defects above" } else { "NOT a manifold" });
+    emit(&o)
+}
+
+#[allow(clippy::too_many_arguments)]
+fn spectrum(
+    path: Option<&Path>,
+    builtin: Option<Builtin>,
+    k: usize,
+    backend: Backend,
+    mass: Mass,
+    threads: usize,
+    json: bool,
+    out: Option<&Path>,
+) -> Result<(), Failure> {
+    let t = Instant::now();
+    let (name, mesh) = match (path, builtin) {
+        (Some(p), _) => (p.display().to_string(), load(p)?),
+        (None, Some(Builtin::Sphere)) => ("builtin unit sphere (icosphere, 5 subdivisions)".to_string(), mesh_io::generate::icosphere(1.0, 5)),
+        (None, Some(Builtin::Torus)) => ("builtin torus R=1, r=0.4".to_string(), mesh_io::generate::torus(1.0, 0.4, 160, 64)),
+        (None, None) => return Err(input(anyhow::anyhow!("give a mesh file or --builtin"))),
+    };
+    let load_s = t.elapsed().as_secs_f64();
+    let params = SpectrumParams {
+        mass: match mass {
+            Mass::Lumped => MassKind::Lumped,
+            Mass::Voronoi => MassKind::Voronoi,
+        },
+        backend,
+        threads,
+    };
+    let s = fmaps::spectrum(&mesh, k, &params).map_err(|e| match e {
+        fmaps::eigensolve::Error::InvalidK { .. }
+        | fmaps::eigensolve::Error::NonPositiveMass { .. }
+        | fmaps::eigensolve::Error::InvalidParameter(_) => input(e),
+        _ => runtime(e),
+    })?;
+    let b = &s.basis;
+    if let Some(out) = out {
+        write_basis(out, b).with_context(|| format!("writing {}", out.display())).map_err(runtime)?;
+    }
+    let peak = peak_rss_mb();
+    let exact: Option<Vec<f64>> = matches!(builtin, Some(Builtin::Sphere)).then(|| {
+        (0..).flat_map(|l: usize| std::iter::repeat_n((l * (l + 1)) as f64, 2 * l + 1)).take(k).collect()
+    });
+    let mut o = String::new();
+    if json {
+        let v = json!({
+            "mesh": name,
+            "n_vertices": mesh.n_vertices(),
+            "n_faces": mesh.n_faces(),
+            "k": k,
+            "backend": b.report.backend,
+            "shift": b.report.shift,
+            "threads": threads,
+            "seconds": { "load": load_s, "laplacian": s.times.laplacian, "factorization": s.times.factorization, "eigensolve": s.times.eigensolve },
+            "restarts": b.report.restarts,
+            "operator_applications": b.report.operator_applications,
+            "max_residual": b.report.max_residual(),
+            "orthonormality_error": b.report.orthonormality_error,
+            "skipped_degenerate_faces": s.skipped_faces.len(),
+            "peak_rss_mb": peak,
+            "eigenvalues": b.eigenvalues.as_slice(),
+            "residuals": b.report.residuals,
+        });
+        return emit(&format!("{}\n", serde_json::to_string(&v).map_err(runtime)?));
+    }
+    outln!(o, "{name}: {} vertices, {} faces", mesh.n_vertices(), mesh.n_faces());
+    if !s.skipped_faces.is_empty() {
+        outln!(o, "warning: {} degenerate faces were left out of the Laplacian", s.skipped_faces.len());
+    }
+    outln!(o, 
+        "{} backend, k = {k}, shift {:.4}: {} restarts, {} operator applications",
+        b.report.backend, b.report.shift, b.report.restarts, b.report.operator_applications
+    );
+    outln!(o, 
+        "seconds: load {:.3}  laplacian {:.4}  factorization {:.3}  eigensolve {:.3}  (peak memory {})",
+        load_s,
+        s.times.laplacian,
+        s.times.factorization,
+        s.times.eigensolve,
+        peak.map_or("n/a".into(), |m| format!("{m:.0} MB"))
+    );
+    outln!(o, 
+        "max residual ‖Lφ − λMφ‖_M⁻¹ = {:.2e}, max |ΦᵀMΦ − I| = {:.2e}",
+        b.report.max_residual(),
+        b.report.orthonormality_error
+    );
+    match &exact {
+        Some(ex) => {
+            outln!(o, "   i   eigenvalue          exact l(l+1)   rel. error");
+            for (i, (l, e)) in b.eigenvalues.iter().zip(ex).enumerate() {
+                let rel = if *e > 0.0 { format!("{:.2e}", (l - e).abs() / e) } else { "-".into() };
+                outln!(o, "{i:4}   {l:<18.10} {e:<14} {rel}");
+            }
+        }
+        None => {
+            outln!(o, "   i   eigenvalue");
+            for (i, l) in b.eigenvalues.iter().enumerate() {
+                outln!(o, "{i:4}   {l:.12}");
+            }
+        }
+    }
+    if let Some(out) = out {
+        outln!(o, "wrote {} (+ _eigenvalues.npy, _mass.npy)", out.display());
+    }
+    emit(&o)
+}
+
+/// FILE.npy: eigenvectors; FILE_eigenvalues.npy; FILE_mass.npy.
+fn write_basis(out: &Path, b: &fmaps::eigensolve::SpectralBasis) -> anyhow::Result<()> {
+    let stem = out.with_extension("");
+    let sibling = |suffix: &str| PathBuf::from(format!("{}_{suffix}.npy", stem.display()));
+    fmaps::npy::save_f64(out, &[b.n(), b.k()], b.eigenvectors.as_slice())?;
+    fmaps::npy::save_f64(&sibling("eigenvalues"), &[b.k()], b.eigenvalues.as_slice())?;
+    fmaps::npy::save_f64(&sibling("mass"), &[b.n()], b.mass.as_slice())?;
+    Ok(())
+}
+
+/// Peak resident memory of this process (Linux), in MB.
+fn peak_rss_mb() -> Option<f64> {
+    let status = std::fs::read_to_string("/proc/self/status").ok()?;
+    let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
+    let kb: f64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kb / 1024.0)
+}
