@@ -196,7 +196,6 @@ fn krylov_schur(
     let mut h = Mat::<f64>::zeros(m + b, m + b);
     let mut w = vec![0.0; n * b];
     let mut coef = Mat::<f64>::zeros(m + b, b);
-    let mut coef2 = Mat::<f64>::zeros(m + b, b);
     let mut rng = SplitMix(p.seed);
 
     // Random start block, orthonormalized.
@@ -221,6 +220,7 @@ fn krylov_schur(
     };
 
     let mut c = 0; // first column of the block whose image is next
+    let mut block_start = 0; // first block of this cycle (couples to all before it)
     let mut restarts = 0;
     let mut applies = 0;
     let mut last_r = Mat::<f64>::zeros(b, b);
@@ -230,20 +230,26 @@ fn krylov_schur(
             let cb = c + b;
             apply(&v[c * n..cb * n], &mut w);
             applies += b;
-            let pre_norms: Vec<f64> = w.chunks(n).map(norm).collect();
-            {
-                let vb = MatRef::from_column_major_slice(&v[..cb * n], n, cb);
-                let mut wm = MatMut::from_column_major_slice_mut(&mut w, n, b);
-                let mut c1 = coef.as_mut().subrows_mut(0, cb);
-                matmul(c1.rb_mut(), Accum::Replace, vb.transpose(), wm.rb(), 1.0, par);
-                matmul(wm.rb_mut(), Accum::Add, vb, c1.rb(), -1.0, par);
-                let mut c2 = coef2.as_mut().subrows_mut(0, cb);
-                matmul(c2.rb_mut(), Accum::Replace, vb.transpose(), wm.rb(), 1.0, par);
-                matmul(wm.rb_mut(), Accum::Add, vb, c2.rb(), -1.0, par);
+            // In exact arithmetic A·V_c only has components along the
+            // previous block, itself, and (for the first block after a
+            // restart) the kept Ritz vectors. Remove those first, cheaply;
+            // then one full classical Gram–Schmidt pass removes the
+            // rounding-level rest, and a second full pass runs only when a
+            // column lost more than half its norm in the first (the DGKS
+            // criterion), which is when that is not enough.
+            let lo = if c == block_start { 0 } else { c - b };
+            coef.fill(0.0);
+            project_out(&v, n, lo, cb, &mut w, b, &mut coef, par);
+            let before: Vec<f64> = w.chunks(n).map(norm).collect();
+            project_out(&v, n, 0, cb, &mut w, b, &mut coef, par);
+            let after: Vec<f64> = w.chunks(n).map(norm).collect();
+            if before.iter().zip(&after).any(|(x, y)| *y < 0.5 * x) {
+                project_out(&v, n, 0, cb, &mut w, b, &mut coef, par);
             }
+            let pre_norms = before;
             for j in 0..b {
                 for i in 0..cb {
-                    let x = coef[(i, j)] + coef2[(i, j)];
+                    let x = coef[(i, j)];
                     h[(i, c + j)] = x;
                     if i < c {
                         h[(c + j, i)] = x;
@@ -356,7 +362,25 @@ fn krylov_schur(
             }
         }
         c = keep;
+        block_start = keep;
         restarts += 1;
+    }
+}
+
+/// Projects columns `lo..hi` of the orthonormal basis `v` out of the n x b
+/// block `w` (one classical Gram–Schmidt pass as two GEMMs), adding the
+/// coefficients to rows `lo..hi` of `coef`.
+#[allow(clippy::too_many_arguments)]
+fn project_out(v: &[f64], n: usize, lo: usize, hi: usize, w: &mut [f64], b: usize, coef: &mut Mat<f64>, par: faer::Par) {
+    let vb = MatRef::from_column_major_slice(&v[lo * n..hi * n], n, hi - lo);
+    let mut wm = MatMut::from_column_major_slice_mut(w, n, b);
+    let mut c = Mat::<f64>::zeros(hi - lo, b);
+    matmul(c.as_mut(), Accum::Replace, vb.transpose(), wm.rb(), 1.0, par);
+    matmul(wm.rb_mut(), Accum::Add, vb, c.as_ref(), -1.0, par);
+    for j in 0..b {
+        for i in 0..hi - lo {
+            coef[(lo + i, j)] += c[(i, j)];
+        }
     }
 }
 

@@ -64,9 +64,16 @@ impl std::str::FromStr for Backend {
 
 impl Backend {
     /// Builds the solver, or explains why it is not available.
-    pub fn solver(self, threads: usize) -> Result<Box<dyn EigenSolver>, eigensolve::Error> {
+    pub fn solver(self, threads: usize, block_size: Option<usize>) -> Result<Box<dyn EigenSolver>, eigensolve::Error> {
         match self {
-            Backend::Native => Ok(Box::new(NativeSolver::new(NativeParams { threads, ..Default::default() }))),
+            Backend::Native => {
+                let d = NativeParams::default();
+                Ok(Box::new(NativeSolver::new(NativeParams {
+                    threads,
+                    block_size: block_size.unwrap_or(d.block_size),
+                    ..d
+                })))
+            }
             Backend::Dense => Ok(Box::new(eigensolve::DenseSolver::default())),
             #[cfg(feature = "arpack")]
             Backend::Arpack => Ok(Box::new(eigensolve::ArpackSolver::default())),
@@ -87,6 +94,8 @@ pub struct SpectrumParams {
     pub backend: Backend,
     /// Threads for the eigensolver (0 or 1 = sequential).
     pub threads: usize,
+    /// Block size of the native backend (`None`: its default).
+    pub block_size: Option<usize>,
 }
 
 /// Seconds spent in each stage of [`spectrum`].
@@ -118,7 +127,7 @@ pub fn spectrum(mesh: &TriMesh, k: usize, params: &SpectrumParams) -> Result<Spe
     let op = laplacian::cotan_laplacian(mesh, &LaplacianParams::with_mass(params.mass));
     let lap = t.elapsed().as_secs_f64();
     let problem = EigenProblem::new(op.stiffness.view(), &op.mass)?;
-    let solver = params.backend.solver(params.threads.max(1))?;
+    let solver = params.backend.solver(params.threads.max(1), params.block_size)?;
     let basis = solver.solve(&problem, k)?;
     let times = StageTimes {
         laplacian: lap,

@@ -53,6 +53,10 @@ enum Command {
         /// Threads for the eigensolver.
         #[arg(long, default_value_t = 1)]
         threads: usize,
+        /// Block size of the native solver (tuning; default chosen by
+        /// benchmark).
+        #[arg(long)]
+        block_size: Option<usize>,
         /// Print one JSON object (eigenvalues in full precision).
         #[arg(long)]
         json: bool,
@@ -108,8 +112,8 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Info { mesh, json } => info(&mesh, json),
-        Command::Spectrum { mesh, builtin, k, backend, mass, threads, json, out } => {
-            spectrum(mesh.as_deref(), builtin, k, backend, mass, threads, json, out.as_deref())
+        Command::Spectrum { mesh, builtin, k, backend, mass, threads, block_size, json, out } => {
+            spectrum(mesh.as_deref(), builtin, k, backend, mass, threads, block_size, json, out.as_deref())
         }
     };
     match result {
@@ -172,6 +176,7 @@ fn spectrum(
     backend: Backend,
     mass: Mass,
     threads: usize,
+    block_size: Option<usize>,
     json: bool,
     out: Option<&Path>,
 ) -> Result<(), Failure> {
@@ -190,6 +195,7 @@ fn spectrum(
         },
         backend,
         threads,
+        block_size,
     };
     let s = fmaps::spectrum(&mesh, k, &params).map_err(|e| match e {
         fmaps::eigensolve::Error::InvalidK { .. }
