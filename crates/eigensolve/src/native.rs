@@ -331,19 +331,7 @@ fn krylov_schur(
         let keep = m - ((m - target) / b).max(1) * b;
         debug_assert!(keep >= k && (m - keep) % b == 0);
         let y = gather_columns(u, &order[..keep]);
-        let mut tmp = vec![0.0; n * keep];
-        {
-            let vm = MatRef::from_column_major_slice(&v[..m * n], n, m);
-            matmul(
-                MatMut::from_column_major_slice_mut(&mut tmp, n, keep),
-                Accum::Replace,
-                vm,
-                y.as_ref(),
-                1.0,
-                par,
-            );
-        }
-        v[..keep * n].copy_from_slice(&tmp);
+        restart_in_place(&mut v, n, m, y.as_ref(), par);
         v.copy_within(m * n..(m + b) * n, keep * n);
         h.fill(0.0);
         for i in 0..keep {
@@ -364,6 +352,24 @@ fn krylov_schur(
         c = keep;
         block_start = keep;
         restarts += 1;
+    }
+}
+
+/// Overwrites the first `keep` columns of the basis with `V[:, 0..m] · Y`
+/// (Y is m x keep), a row chunk at a time: rows are independent, so a small
+/// temporary suffices instead of an n x keep copy of the basis.
+fn restart_in_place(v: &mut [f64], n: usize, m: usize, y: MatRef<'_, f64>, par: faer::Par) {
+    const CHUNK: usize = 512;
+    let keep = y.ncols();
+    let mut tmp = Mat::<f64>::zeros(CHUNK, keep);
+    let mut vm = MatMut::from_column_major_slice_mut(&mut v[..m * n], n, m);
+    let mut r0 = 0;
+    while r0 < n {
+        let rows = CHUNK.min(n - r0);
+        let mut t = tmp.as_mut().subrows_mut(0, rows);
+        matmul(t.rb_mut(), Accum::Replace, vm.rb().submatrix(r0, 0, rows, m), y, 1.0, par);
+        vm.rb_mut().submatrix_mut(r0, 0, rows, keep).copy_from(t.rb());
+        r0 += rows;
     }
 }
 
