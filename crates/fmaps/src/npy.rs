@@ -55,6 +55,7 @@ mod tests {
         assert_eq!(f64::from_le_bytes(out[10 + hlen..18 + hlen].try_into().unwrap()), 1.0);
         let mut v = Vec::new();
         super::write_f64(&mut v, &[3], &[1.0, 2.0, 3.0]).unwrap();
-        assert!(std::str::from_utf8(&v[10..]).unwrap().contains("'shape': (3,)"));
+        let h = u16::from_le_bytes([v[8], v[9]]) as usize;
+        assert!(std::str::from_utf8(&v[10..10 + h]).unwrap().contains("'shape': (3,)"));
     }
 }

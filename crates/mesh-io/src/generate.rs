@@ -152,3 +152,29 @@ pub fn translated(mesh: &TriMesh, offset: [f64; 3]) -> TriMesh {
         .collect();
     TriMesh::new(v, mesh.faces().to_vec()).expect("translation keeps a valid mesh valid")
 }
+
+/// One step of 1-to-4 midpoint subdivision: a new vertex at the midpoint of
+/// every edge (appended after the original vertices, in order of first
+/// appearance over the faces), each triangle split into four. The surface
+/// (and its area) is unchanged; `V + E` vertices and `4F` faces.
+pub fn subdivide(mesh: &TriMesh) -> TriMesh {
+    let mut v = mesh.vertices().to_vec();
+    let mut mid: HashMap<(usize, usize), usize> = HashMap::with_capacity(3 * mesh.n_faces() / 2);
+    let mut f = Vec::with_capacity(4 * mesh.n_faces());
+    for t in mesh.faces() {
+        let mut m = [0; 3];
+        for k in 0..3 {
+            let (a, b) = (t[k], t[(k + 1) % 3]);
+            m[k] = *mid.entry((a.min(b), a.max(b))).or_insert_with(|| {
+                let (pa, pb) = (v[a], v[b]);
+                v.push([(pa[0] + pb[0]) / 2.0, (pa[1] + pb[1]) / 2.0, (pa[2] + pb[2]) / 2.0]);
+                v.len() - 1
+            });
+        }
+        f.push([t[0], m[0], m[2]]);
+        f.push([t[1], m[1], m[0]]);
+        f.push([t[2], m[2], m[1]]);
+        f.push(m);
+    }
+    TriMesh::new(v, f).expect("subdivision of a valid mesh is valid")
+}

@@ -108,3 +108,20 @@ fn flipped_face_is_an_orientation_defect() {
     assert_eq!(r.inconsistently_oriented_edges, 3);
     assert!(r.is_manifold());
 }
+
+#[test]
+fn subdivision_keeps_the_surface() {
+    use fmaps_mesh_io::generate::subdivide;
+    for m in [torus(3.0, 1.0, 9, 7), grid(2.0, 1.0, 3, 2)] {
+        let r = m.validate();
+        let s = subdivide(&m);
+        let rs = s.validate();
+        assert_eq!(rs.n_vertices, r.n_vertices + r.n_edges);
+        assert_eq!(rs.n_faces, 4 * r.n_faces);
+        assert_eq!(rs.euler_characteristic, r.euler_characteristic);
+        assert_eq!(rs.boundary_loops, r.boundary_loops);
+        assert!((rs.area - r.area).abs() < 1e-12 * r.area);
+        assert!(rs.is_clean());
+        assert_eq!(rs.inconsistently_oriented_edges, 0);
+    }
+}

@@ -1,0 +1,41 @@
+//! On a real benchmark mesh (skipped with a message when the dataset is
+//! absent): the mesh loads clean and the spectrum meets the basis contract;
+//! with the `arpack` feature, both backends agree to 1e-10.
+
+use std::path::PathBuf;
+
+fn data_dir() -> Option<PathBuf> {
+    let dir = std::env::var_os("FMAPS_DATA")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared/datasets"));
+    dir.join("bcicp/FAUST/vtx_5k/tr_reg_000.off").exists().then_some(dir)
+}
+
+#[test]
+fn faust_mesh_spectrum() {
+    let Some(dir) = data_dir() else {
+        eprintln!("skipped: FAUST data not found (set FMAPS_DATA to the datasets directory)");
+        return;
+    };
+    let mesh = fmaps::mesh_io::read_mesh(dir.join("bcicp/FAUST/vtx_5k/tr_reg_000.off")).unwrap();
+    let r = mesh.validate();
+    assert!(r.is_clean() && r.genus == Some(0), "{r:?}");
+    let gt = fmaps::mesh_io::read_vts(dir.join("bcicp/FAUST/vtx_5k/corres/tr_reg_000.vts")).unwrap();
+    fmaps::mesh_io::check_indices(&gt, mesh.n_vertices(), None).unwrap();
+
+    let s = fmaps::spectrum(&mesh, 60, &fmaps::SpectrumParams::default()).unwrap();
+    let b = &s.basis;
+    assert!(b.eigenvalues[0].abs() < 1e-8 && b.eigenvalues[1] > 1.0);
+    assert!(b.report.orthonormality_error < 1e-10);
+    assert!(b.report.max_residual() < 1e-6 * b.eigenvalues[59]);
+
+    #[cfg(feature = "arpack")]
+    {
+        let p = fmaps::SpectrumParams { backend: fmaps::Backend::Arpack, ..Default::default() };
+        let a = fmaps::spectrum(&mesh, 60, &p).unwrap();
+        for i in 1..60 {
+            let (x, y) = (b.eigenvalues[i], a.basis.eigenvalues[i]);
+            assert!((x - y).abs() < 1e-10 * y, "λ_{i}: native {x}, arpack {y}");
+        }
+    }
+}
