@@ -37,7 +37,7 @@ pub struct ShiftInvert {
     values: Vec<f64>,
     n: usize,
     shift: f64,
-    par: Par,
+    threads: usize,
     seconds: f64,
 }
 
@@ -120,7 +120,7 @@ impl ShiftInvert {
             values,
             n,
             shift,
-            par,
+            threads: threads.max(1),
             seconds: t0.elapsed().as_secs_f64(),
         })
     }
@@ -149,17 +149,34 @@ impl ShiftInvert {
     }
 
     /// Overwrites the n x `ncols` column-major block `rhs` with
-    /// `(L − σM)⁻¹ rhs`.
+    /// `(L − σM)⁻¹ rhs`. With several threads the columns are split among
+    /// them, each solved sequentially: measured on an 80k-vertex mesh,
+    /// faer's parallel supernodal solve of one block was 8x slower than
+    /// the sequential one, while splitting the right-hand sides scales.
     ///
     /// # Panics
     /// If `rhs.len() != n * ncols`.
     #[track_caller]
     pub fn solve_in_place(&self, rhs: &mut [f64], ncols: usize) {
         assert_eq!(rhs.len(), self.n * ncols, "solve_in_place: wrong block size");
-        let mut mem = MemBuffer::new(self.symbolic.solve_in_place_scratch::<f64>(ncols, self.par));
+        let parts = self.threads.min(ncols);
+        if parts <= 1 {
+            self.solve_seq(rhs, ncols);
+            return;
+        }
+        let per = ncols.div_ceil(parts);
+        std::thread::scope(|s| {
+            for chunk in rhs.chunks_mut(per * self.n) {
+                s.spawn(move || self.solve_seq(chunk, chunk.len() / self.n));
+            }
+        });
+    }
+
+    fn solve_seq(&self, rhs: &mut [f64], ncols: usize) {
+        let mut mem = MemBuffer::new(self.symbolic.solve_in_place_scratch::<f64>(ncols, Par::Seq));
         let llt = LltRef::new(&self.symbolic, &self.values);
         let x = MatMut::from_column_major_slice_mut(rhs, self.n, ncols);
-        llt.solve_in_place_with_conj(Conj::No, x, self.par, MemStack::new(&mut mem));
+        llt.solve_in_place_with_conj(Conj::No, x, Par::Seq, MemStack::new(&mut mem));
     }
 }
 
