@@ -47,16 +47,26 @@ pub fn bench(args: &Args) -> anyhow::Result<()> {
     let data = data_dir(args.data.as_deref());
     let base = data.join("bcicp/FAUST/vtx_5k/tr_reg_000.off");
     if !base.exists() {
-        bail!("{} not found: pass --data or set FMAPS_DATA to the datasets directory", base.display());
+        bail!(
+            "{} not found: pass --data or set FMAPS_DATA to the datasets directory",
+            base.display()
+        );
     }
     let python = peer_python(args.python.as_deref());
     if python.is_none() {
-        eprintln!("note: the Python peers are not set up (../shared/peers/setup.sh); SciPy columns stay empty");
+        eprintln!(
+            "note: the Python peers are not set up (../shared/peers/setup.sh); SciPy columns stay empty"
+        );
     }
     let arpack = !args.no_arpack
-        && Command::new("pkg-config").args(["--exists", "arpack"]).status().is_ok_and(|s| s.success());
+        && Command::new("pkg-config")
+            .args(["--exists", "arpack"])
+            .status()
+            .is_ok_and(|s| s.success());
     let mut build = Command::new(std::env::var("CARGO").unwrap_or_else(|_| "cargo".into()));
-    build.current_dir(&root).args(["build", "--release", "-p", "fmaps"]);
+    build
+        .current_dir(&root)
+        .args(["build", "--release", "-p", "fmaps"]);
     if arpack {
         build.args(["--features", "arpack"]);
     }
@@ -69,7 +79,11 @@ pub fn bench(args: &Args) -> anyhow::Result<()> {
     let out_dir = root.join("target/bench");
     let mesh_dir = out_dir.join("meshes");
     std::fs::create_dir_all(&mesh_dir)?;
-    let levels: Vec<u32> = if args.quick { vec![0] } else { args.levels.clone() };
+    let levels: Vec<u32> = if args.quick {
+        vec![0]
+    } else {
+        args.levels.clone()
+    };
     let mut meshes = Vec::new();
     let mut mesh = fmaps::mesh_io::read_mesh(&base)?;
     for level in 0..=levels.iter().copied().max().unwrap_or(0) {
@@ -77,7 +91,11 @@ pub fn bench(args: &Args) -> anyhow::Result<()> {
             mesh = fmaps::mesh_io::generate::subdivide(&mesh);
         }
         if levels.contains(&level) {
-            let p = if level == 0 { base.clone() } else { mesh_dir.join(format!("tr_reg_000_sub{level}.off")) };
+            let p = if level == 0 {
+                base.clone()
+            } else {
+                mesh_dir.join(format!("tr_reg_000_sub{level}.off"))
+            };
             if level > 0 && !p.exists() {
                 fmaps::mesh_io::write_mesh(&p, &mesh)?;
             }
@@ -86,9 +104,16 @@ pub fn bench(args: &Args) -> anyhow::Result<()> {
     }
 
     let mut records = Vec::new();
-    println!("machine: {} cores; {}", std::thread::available_parallelism().map_or(0, |n| n.get()), cpu_model());
+    println!(
+        "machine: {} cores; {}",
+        std::thread::available_parallelism().map_or(0, |n| n.get()),
+        cpu_model()
+    );
     println!("\nLaplacian assembly (cotangent stiffness + lumped mass), median of 7 runs");
-    println!("{:<22} {:>7} {:>11} {:>13} {:>7}", "mesh", "n", "fmaps ms", "NumPy ms", "ratio");
+    println!(
+        "{:<22} {:>7} {:>11} {:>13} {:>7}",
+        "mesh", "n", "fmaps ms", "NumPy ms", "ratio"
+    );
     for (path, mesh) in &meshes {
         let mut ts: Vec<f64> = (0..7)
             .map(|_| {
@@ -100,7 +125,10 @@ pub fn bench(args: &Args) -> anyhow::Result<()> {
             .collect();
         ts.sort_by(f64::total_cmp);
         let ours = ts[3];
-        let peer = python.as_ref().map(|py| numpy_assembly(py, path)).transpose()?;
+        let peer = python
+            .as_ref()
+            .map(|py| numpy_assembly(py, path))
+            .transpose()?;
         println!(
             "{:<22} {:>7} {:>11.2} {:>13} {:>7}",
             name(path),
@@ -112,40 +140,76 @@ pub fn bench(args: &Args) -> anyhow::Result<()> {
         records.push(json!({"stage": "laplacian", "mesh": name(path), "n": mesh.n_vertices(), "fmaps_seconds": ours, "numpy_seconds": peer}));
     }
 
-    println!("\nEigensolve: k smallest eigenpairs of L φ = λ M φ, factorization + iteration, best of {{3 runs below 25k vertices, 1 above}}");
-    println!("SciPy: eigsh(L, k, M, sigma=-0.01) (../shared/peers/eigsh.py); ratio = SciPy time / ours; Δλ = max relative eigenvalue difference to SciPy (λ_1..λ_k-1)");
+    println!(
+        "\nEigensolve: k smallest eigenpairs of L φ = λ M φ, factorization + iteration, best of {{3 runs below 25k vertices, 1 above}}"
+    );
+    println!(
+        "SciPy: eigsh(L, k, M, sigma=-0.01) (../shared/peers/eigsh.py); ratio = SciPy time / ours; Δλ = max relative eigenvalue difference to SciPy (λ_1..λ_k-1)"
+    );
     println!(
         "{:<22} {:>6} {:>4} {:>3} | {:>8} | {:>8} {:>6} {:>8} | {:>8} {:>6} {:>8} | {:>13}",
-        "mesh", "n", "k", "thr", "SciPy s", "native s", "ratio", "Δλ", "arpack s", "ratio", "Δλ", "peak MB S/n/a"
+        "mesh",
+        "n",
+        "k",
+        "thr",
+        "SciPy s",
+        "native s",
+        "ratio",
+        "Δλ",
+        "arpack s",
+        "ratio",
+        "Δλ",
+        "peak MB S/n/a"
     );
     for (path, mesh) in &meshes {
         let n = mesh.n_vertices();
         let reps = if n < 25_000 { 3 } else { 1 };
         for &k in &args.ks {
             for &thr in &args.threads {
-                let scipy = python.as_ref().map(|py| best_of(reps, || scipy_eigsh(py, path, k, thr))).transpose()?;
+                let scipy = python
+                    .as_ref()
+                    .map(|py| best_of(reps, || scipy_eigsh(py, path, k, thr)))
+                    .transpose()?;
                 let native = best_of(reps, || ours(&fmaps_bin, path, k, thr, "native"))?;
-                let arp = if arpack { Some(best_of(reps, || ours(&fmaps_bin, path, k, thr, "arpack"))?) } else { None };
-                let ratio = |o: &Solve| scipy.as_ref().map_or("-".into(), |s| format!("{:.2}x", s.seconds / o.seconds));
-                let diff = |o: &Solve| scipy.as_ref().map_or("-".into(), |s| format!("{:.1e}", max_rel_diff(&s.eigenvalues, &o.eigenvalues)));
+                let arp = if arpack {
+                    Some(best_of(reps, || ours(&fmaps_bin, path, k, thr, "arpack"))?)
+                } else {
+                    None
+                };
+                let ratio = |o: &Solve| {
+                    scipy
+                        .as_ref()
+                        .map_or("-".into(), |s| format!("{:.2}x", s.seconds / o.seconds))
+                };
+                let diff = |o: &Solve| {
+                    scipy.as_ref().map_or("-".into(), |s| {
+                        format!("{:.1e}", max_rel_diff(&s.eigenvalues, &o.eigenvalues))
+                    })
+                };
                 println!(
                     "{:<22} {:>6} {:>4} {:>3} | {:>8} | {:>8.3} {:>6} {:>8} | {:>8} {:>6} {:>8} | {:>13}",
                     name(path),
                     n,
                     k,
                     thr,
-                    scipy.as_ref().map_or("-".into(), |s| format!("{:.3}", s.seconds)),
+                    scipy
+                        .as_ref()
+                        .map_or("-".into(), |s| format!("{:.3}", s.seconds)),
                     native.seconds,
                     ratio(&native),
                     diff(&native),
-                    arp.as_ref().map_or("-".into(), |a| format!("{:.3}", a.seconds)),
+                    arp.as_ref()
+                        .map_or("-".into(), |a| format!("{:.3}", a.seconds)),
                     arp.as_ref().map_or("-".into(), ratio),
                     arp.as_ref().map_or("-".into(), diff),
                     format!(
                         "{}/{:.0}/{}",
-                        scipy.as_ref().map_or("-".into(), |s| format!("{:.0}", s.peak_mb)),
+                        scipy
+                            .as_ref()
+                            .map_or("-".into(), |s| format!("{:.0}", s.peak_mb)),
                         native.peak_mb,
-                        arp.as_ref().map_or("-".into(), |a| format!("{:.0}", a.peak_mb))
+                        arp.as_ref()
+                            .map_or("-".into(), |a| format!("{:.0}", a.peak_mb))
                     ),
                 );
                 records.push(json!({
@@ -160,7 +224,10 @@ pub fn bench(args: &Args) -> anyhow::Result<()> {
         }
     }
     let json_path = out_dir.join("eigensolve.json");
-    std::fs::write(&json_path, serde_json::to_string_pretty(&json!({"cpu": cpu_model(), "records": records}))?)?;
+    std::fs::write(
+        &json_path,
+        serde_json::to_string_pretty(&json!({"cpu": cpu_model(), "records": records}))?,
+    )?;
     println!("\nwrote {}", json_path.display());
     Ok(())
 }
@@ -182,7 +249,10 @@ fn best_of(reps: usize, mut f: impl FnMut() -> anyhow::Result<Solve>) -> anyhow:
     for _ in 1..reps {
         let s = f()?;
         if s.seconds < best.seconds {
-            best = Solve { peak_mb: best.peak_mb.max(s.peak_mb), ..s };
+            best = Solve {
+                peak_mb: best.peak_mb.max(s.peak_mb),
+                ..s
+            };
         }
     }
     Ok(best)
@@ -192,14 +262,23 @@ fn ours(bin: &Path, mesh: &Path, k: usize, threads: usize, backend: &str) -> any
     let r = run(Command::new(bin)
         .arg("spectrum")
         .arg(mesh)
-        .args(["--k", &k.to_string(), "--threads", &threads.to_string(), "--backend", backend, "--json"])
+        .args([
+            "--k",
+            &k.to_string(),
+            "--threads",
+            &threads.to_string(),
+            "--backend",
+            backend,
+            "--json",
+        ])
         // ARPACK's BLAS calls go to OpenBLAS: same thread count as the rest.
         .env("OPENBLAS_NUM_THREADS", threads.to_string())
         .env("OMP_NUM_THREADS", threads.to_string()))?;
     let v: Value = serde_json::from_str(&r.stdout)?;
     let s = &v["seconds"];
     Ok(Solve {
-        seconds: s["factorization"].as_f64().unwrap_or(0.0) + s["eigensolve"].as_f64().unwrap_or(0.0),
+        seconds: s["factorization"].as_f64().unwrap_or(0.0)
+            + s["eigensolve"].as_f64().unwrap_or(0.0),
         peak_mb: r.peak_mb,
         eigenvalues: serde_json::from_value(v["eigenvalues"].clone())?,
     })
@@ -216,7 +295,9 @@ fn scipy_eigsh(py: &Path, mesh: &Path, k: usize, threads: usize) -> anyhow::Resu
         .env("MKL_NUM_THREADS", &t))?;
     let v: Value = serde_json::from_str(&r.stdout)?;
     Ok(Solve {
-        seconds: v["seconds"].as_f64().context("eigsh.py printed no seconds")?,
+        seconds: v["seconds"]
+            .as_f64()
+            .context("eigsh.py printed no seconds")?,
         peak_mb: r.peak_mb,
         eigenvalues: serde_json::from_value(v["eigenvalues"].clone())?,
     })
@@ -231,21 +312,33 @@ fn numpy_assembly(py: &Path, mesh: &Path) -> anyhow::Result<f64> {
         peers = peers_dir().display().to_string(),
         mesh = mesh.display().to_string()
     );
-    let r = run(Command::new(py).args(["-c", &code]).env("OPENBLAS_NUM_THREADS", "1").env("OMP_NUM_THREADS", "1"))?;
+    let r = run(Command::new(py)
+        .args(["-c", &code])
+        .env("OPENBLAS_NUM_THREADS", "1")
+        .env("OMP_NUM_THREADS", "1"))?;
     Ok(r.stdout.trim().parse()?)
 }
 
 fn max_rel_diff(a: &[f64], b: &[f64]) -> f64 {
-    a.iter().zip(b).skip(1).map(|(x, y)| (x - y).abs() / x.abs()).fold(0.0, f64::max)
+    a.iter()
+        .zip(b)
+        .skip(1)
+        .map(|(x, y)| (x - y).abs() / x.abs())
+        .fold(0.0, f64::max)
 }
 
 fn name(p: &Path) -> String {
-    p.file_stem().map_or_else(String::new, |s| s.to_string_lossy().into_owned())
+    p.file_stem()
+        .map_or_else(String::new, |s| s.to_string_lossy().into_owned())
 }
 
 fn cpu_model() -> String {
     std::fs::read_to_string("/proc/cpuinfo")
         .ok()
-        .and_then(|s| s.lines().find(|l| l.starts_with("model name")).map(|l| l.split(':').nth(1).unwrap_or("").trim().to_string()))
+        .and_then(|s| {
+            s.lines()
+                .find(|l| l.starts_with("model name"))
+                .map(|l| l.split(':').nth(1).unwrap_or("").trim().to_string())
+        })
         .unwrap_or_else(|| "unknown CPU".into())
 }

@@ -8,7 +8,10 @@ use anyhow::{Context, bail};
 
 /// The workspace root (the parent of this crate's directory).
 pub fn root() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).parent().unwrap().to_path_buf()
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .parent()
+        .unwrap()
+        .to_path_buf()
 }
 
 /// `--data`, else `FMAPS_DATA`, else `../shared/datasets` next to the root.
@@ -28,7 +31,10 @@ pub fn peer_python(arg: Option<&Path>) -> Option<PathBuf> {
     let p = arg.map(Path::to_path_buf).unwrap_or_else(|| {
         std::env::var_os("FMAPS_PEERS_VENV")
             .map(PathBuf::from)
-            .unwrap_or_else(|| PathBuf::from(std::env::var_os("HOME").unwrap_or_default()).join(".cache/fmaps-peers"))
+            .unwrap_or_else(|| {
+                PathBuf::from(std::env::var_os("HOME").unwrap_or_default())
+                    .join(".cache/fmaps-peers")
+            })
             .join("bin/python")
     });
     p.exists().then_some(p)
@@ -66,5 +72,8 @@ pub fn run(cmd: &mut Command) -> anyhow::Result<Run> {
     if !(libc::WIFEXITED(status) && libc::WEXITSTATUS(status) == 0) {
         bail!("{desc} failed:\n{stderr}");
     }
-    Ok(Run { stdout, peak_mb: usage.ru_maxrss as f64 / 1024.0 })
+    Ok(Run {
+        stdout,
+        peak_mb: usage.ru_maxrss as f64 / 1024.0,
+    })
 }

@@ -41,7 +41,13 @@ pub struct ArpackParams {
 
 impl Default for ArpackParams {
     fn default() -> Self {
-        Self { shift: None, tol: 0.0, ncv: None, max_iterations: 1000, seed: 0x5eed_f00d }
+        Self {
+            shift: None,
+            tol: 0.0,
+            ncv: None,
+            max_iterations: 1000,
+            seed: 0x5eed_f00d,
+        }
     }
 }
 
@@ -65,11 +71,14 @@ impl EigenSolver for ArpackSolver {
         let ncv = p.ncv.unwrap_or((2 * k + 1).max(20)).min(n);
         if ncv <= k {
             return Err(Error::InvalidParameter(format!(
-                "ARPACK needs k < ncv <= n; with n = {n} at most k = {} eigenpairs", n - 1
+                "ARPACK needs k < ncv <= n; with n = {n} at most k = {} eigenpairs",
+                n - 1
             )));
         }
         let to_int = |x: usize| {
-            a_int::try_from(x).map_err(|_| Error::InvalidParameter(format!("{x} does not fit ARPACK's integer type")))
+            a_int::try_from(x).map_err(|_| {
+                Error::InvalidParameter(format!("{x} does not fit ARPACK's integer type"))
+            })
         };
         let (n_i, k_i, ncv_i) = (to_int(n)?, to_int(k)?, to_int(ncv)?);
         let lworkl = ncv * (ncv + 8);
@@ -153,7 +162,10 @@ impl EigenSolver for ArpackSolver {
             });
         }
         if info != 0 {
-            return Err(Error::Backend { backend: "arpack", message: format!("dsaupd info = {info}") });
+            return Err(Error::Backend {
+                backend: "arpack",
+                message: format!("dsaupd info = {info}"),
+            });
         }
         let select: Vec<a_int> = vec![0; ncv];
         let mut d = vec![0.0; k];
@@ -187,7 +199,10 @@ impl EigenSolver for ArpackSolver {
             );
         }
         if info2 != 0 {
-            return Err(Error::Backend { backend: "arpack", message: format!("dseupd info = {info2}") });
+            return Err(Error::Backend {
+                backend: "arpack",
+                message: format!("dseupd info = {info2}"),
+            });
         }
         drop(_guard);
         let mut order: Vec<usize> = (0..k).collect();
@@ -206,6 +221,11 @@ impl EigenSolver for ArpackSolver {
             residuals: residuals(problem, &eigenvalues, &eigenvectors),
             orthonormality_error: orthonormality_error(mass, &eigenvectors, 1),
         };
-        Ok(SpectralBasis { eigenvalues, eigenvectors, mass: DVector::from_column_slice(mass), report })
+        Ok(SpectralBasis {
+            eigenvalues,
+            eigenvectors,
+            mass: DVector::from_column_slice(mass),
+            report,
+        })
     }
 }

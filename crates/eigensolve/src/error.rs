@@ -31,7 +31,9 @@ pub enum Error {
         value: f64,
     },
     /// The stiffness matrix is not symmetric.
-    #[error("the stiffness matrix is not symmetric: entry ({row}, {col}) = {a_ij} but ({col}, {row}) = {a_ji}")]
+    #[error(
+        "the stiffness matrix is not symmetric: entry ({row}, {col}) = {a_ij} but ({col}, {row}) = {a_ji}"
+    )]
     NotSymmetric {
         /// Row.
         row: usize,
@@ -43,7 +45,9 @@ pub enum Error {
         a_ji: f64,
     },
     /// A mass entry is zero, negative or not finite.
-    #[error("mass entry {index} is {value}; the mass must be positive and finite (is vertex {index} unreferenced or only in degenerate faces?)")]
+    #[error(
+        "mass entry {index} is {value}; the mass must be positive and finite (is vertex {index} unreferenced or only in degenerate faces?)"
+    )]
     NonPositiveMass {
         /// The vertex.
         index: usize,
@@ -63,7 +67,9 @@ pub enum Error {
     InvalidParameter(String),
     /// `L - σM` could not be factorized (it must be positive definite:
     /// `L` PSD and a negative shift σ).
-    #[error("the shifted matrix L - ({shift})M is not positive definite (pivot {pivot}); the stiffness must be positive semi-definite and the shift negative")]
+    #[error(
+        "the shifted matrix L - ({shift})M is not positive definite (pivot {pivot}); the stiffness must be positive semi-definite and the shift negative"
+    )]
     NotPositiveDefinite {
         /// The shift σ.
         shift: f64,
@@ -79,7 +85,9 @@ pub enum Error {
         max: usize,
     },
     /// The iteration stopped before `wanted` eigenpairs met the tolerance.
-    #[error("no convergence: {converged} of {wanted} eigenpairs converged after {restarts} restarts ({operator_applications} operator applications); raise max_restarts or the subspace size")]
+    #[error(
+        "no convergence: {converged} of {wanted} eigenpairs converged after {restarts} restarts ({operator_applications} operator applications); raise max_restarts or the subspace size"
+    )]
     NoConvergence {
         /// Eigenpairs that met the tolerance.
         converged: usize,

@@ -5,11 +5,12 @@
 use std::time::Instant;
 
 use faer::dyn_stack::{MemBuffer, MemStack};
-use faer::sparse::linalg::cholesky::{
-    CholeskySymbolicParams, LltRef, SymbolicCholesky, SymmetricOrdering, factorize_symbolic_cholesky,
-};
 use faer::linalg::solvers::LltError;
 use faer::sparse::linalg::SupernodalThreshold;
+use faer::sparse::linalg::cholesky::{
+    CholeskySymbolicParams, LltRef, SymbolicCholesky, SymmetricOrdering,
+    factorize_symbolic_cholesky,
+};
 use faer::sparse::{SparseColMatRef, SymbolicSparseColMatRef};
 use faer::{Conj, MatMut, Par, Side};
 
@@ -44,9 +45,16 @@ pub struct ShiftInvert {
 impl ShiftInvert {
     /// Factorizes `L − σM` for the shift σ = `shift` with `threads` threads
     /// (1 = sequential).
-    pub fn new(problem: &EigenProblem<'_>, shift: f64, threads: usize, kind: Factorization) -> Result<Self> {
+    pub fn new(
+        problem: &EigenProblem<'_>,
+        shift: f64,
+        threads: usize,
+        kind: Factorization,
+    ) -> Result<Self> {
         if !shift.is_finite() {
-            return Err(Error::InvalidParameter(format!("shift must be finite, got {shift}")));
+            return Err(Error::InvalidParameter(format!(
+                "shift must be finite, got {shift}"
+            )));
         }
         let t0 = Instant::now();
         let n = problem.n();
@@ -90,15 +98,18 @@ impl ShiftInvert {
             supernodal_flop_ratio_threshold: threshold,
             ..Default::default()
         };
-        let symbolic = factorize_symbolic_cholesky(sym_mat, Side::Lower, SymmetricOrdering::Amd, params)
-            .map_err(|e| Error::OutOfMemory(format!("symbolic Cholesky: {e:?}")))?;
+        let symbolic =
+            factorize_symbolic_cholesky(sym_mat, Side::Lower, SymmetricOrdering::Amd, params)
+                .map_err(|e| Error::OutOfMemory(format!("symbolic Cholesky: {e:?}")))?;
         let mut values = Vec::new();
-        values
-            .try_reserve_exact(symbolic.len_val())
-            .map_err(|_| Error::OutOfMemory(format!("{} Cholesky factor entries", symbolic.len_val())))?;
+        values.try_reserve_exact(symbolic.len_val()).map_err(|_| {
+            Error::OutOfMemory(format!("{} Cholesky factor entries", symbolic.len_val()))
+        })?;
         values.resize(symbolic.len_val(), 0.0);
-        let mut mem = MemBuffer::try_new(symbolic.factorize_numeric_llt_scratch::<f64>(par, Default::default()))
-            .map_err(|_| Error::OutOfMemory("Cholesky workspace".into()))?;
+        let mut mem = MemBuffer::try_new(
+            symbolic.factorize_numeric_llt_scratch::<f64>(par, Default::default()),
+        )
+        .map_err(|_| Error::OutOfMemory("Cholesky workspace".into()))?;
         let mat = SparseColMatRef::new(sym_mat, &vals);
         let result = symbolic.factorize_numeric_llt::<f64>(
             &mut values,
@@ -112,7 +123,10 @@ impl ShiftInvert {
         match result {
             Ok(_) => {}
             Err(LltError::NonPositivePivot { index }) => {
-                return Err(Error::NotPositiveDefinite { shift, pivot: index });
+                return Err(Error::NotPositiveDefinite {
+                    shift,
+                    pivot: index,
+                });
             }
         }
         Ok(Self {
@@ -158,7 +172,11 @@ impl ShiftInvert {
     /// If `rhs.len() != n * ncols`.
     #[track_caller]
     pub fn solve_in_place(&self, rhs: &mut [f64], ncols: usize) {
-        assert_eq!(rhs.len(), self.n * ncols, "solve_in_place: wrong block size");
+        assert_eq!(
+            rhs.len(),
+            self.n * ncols,
+            "solve_in_place: wrong block size"
+        );
         let parts = self.threads.min(ncols);
         if parts <= 1 {
             self.solve_seq(rhs, ncols);
@@ -181,5 +199,9 @@ impl ShiftInvert {
 }
 
 pub(crate) fn par_of(threads: usize) -> Par {
-    if threads <= 1 { Par::Seq } else { Par::rayon(threads) }
+    if threads <= 1 {
+        Par::Seq
+    } else {
+        Par::rayon(threads)
+    }
 }

@@ -96,14 +96,23 @@ impl<'a> EigenProblem<'a> {
         let mut amax = 0.0f64;
         for (&v, (r, c)) in stiffness.iter() {
             if !v.is_finite() {
-                return Err(Error::NonFiniteStiffness { row: r, col: c, value: v });
+                return Err(Error::NonFiniteStiffness {
+                    row: r,
+                    col: c,
+                    value: v,
+                });
             }
             amax = amax.max(v.abs());
         }
         for (&v, (r, c)) in stiffness.iter() {
             let t = stiffness.get(c, r).copied().unwrap_or(0.0);
             if (v - t).abs() > 1e-12 * amax {
-                return Err(Error::NotSymmetric { row: r, col: c, a_ij: v, a_ji: t });
+                return Err(Error::NotSymmetric {
+                    row: r,
+                    col: c,
+                    a_ij: v,
+                    a_ji: t,
+                });
             }
         }
         if let Some((index, &value)) = mass
@@ -217,7 +226,13 @@ impl SpectralBasis {
     /// If `f` does not have n rows.
     #[track_caller]
     pub fn project(&self, f: &DMatrix<f64>) -> DMatrix<f64> {
-        assert_eq!(f.nrows(), self.n(), "project: function has {} rows, basis has {}", f.nrows(), self.n());
+        assert_eq!(
+            f.nrows(),
+            self.n(),
+            "project: function has {} rows, basis has {}",
+            f.nrows(),
+            self.n()
+        );
         let mut mf = f.clone();
         for mut col in mf.column_iter_mut() {
             col.component_mul_assign(&self.mass);
@@ -231,7 +246,13 @@ impl SpectralBasis {
     /// If `a` does not have k rows.
     #[track_caller]
     pub fn reconstruct(&self, a: &DMatrix<f64>) -> DMatrix<f64> {
-        assert_eq!(a.nrows(), self.k(), "reconstruct: coefficients have {} rows, basis has k = {}", a.nrows(), self.k());
+        assert_eq!(
+            a.nrows(),
+            self.k(),
+            "reconstruct: coefficients have {} rows, basis has k = {}",
+            a.nrows(),
+            self.k()
+        );
         &self.eigenvectors * a
     }
 

@@ -102,10 +102,15 @@ impl EigenSolver for NativeSolver {
         problem.check_k(k)?;
         let p = &self.params;
         if !(p.tol > 0.0 && p.tol < 1.0) {
-            return Err(Error::InvalidParameter(format!("tol must be in (0, 1), got {}", p.tol)));
+            return Err(Error::InvalidParameter(format!(
+                "tol must be in (0, 1), got {}",
+                p.tol
+            )));
         }
         if p.block_size == 0 {
-            return Err(Error::InvalidParameter("block_size must be at least 1".into()));
+            return Err(Error::InvalidParameter(
+                "block_size must be at least 1".into(),
+            ));
         }
         let shift = p.shift.unwrap_or_else(|| default_shift(problem.mass()));
         let n = problem.n();
@@ -124,7 +129,11 @@ impl EigenSolver for NativeSolver {
                 factorization_seconds: 0.0,
                 iteration_seconds: t0.elapsed().as_secs_f64(),
                 residuals: residuals(problem, &eigenvalues, &eigenvectors),
-                orthonormality_error: orthonormality_error(problem.mass(), &eigenvectors, p.threads),
+                orthonormality_error: orthonormality_error(
+                    problem.mass(),
+                    &eigenvectors,
+                    p.threads,
+                ),
             };
             return Ok(SpectralBasis {
                 eigenvalues,
@@ -281,7 +290,10 @@ fn krylov_schur(
         let hm = h.as_ref().submatrix(0, 0, m, m).to_owned();
         let evd = hm
             .self_adjoint_eigen(Side::Lower)
-            .map_err(|e| Error::Backend { backend: "native", message: format!("dense eigensolver: {e:?}") })?;
+            .map_err(|e| Error::Backend {
+                backend: "native",
+                message: format!("dense eigensolver: {e:?}"),
+            })?;
         let s = evd.S().column_vector();
         let u = evd.U();
         let order: Vec<usize> = (0..m).rev().collect();
@@ -301,7 +313,9 @@ fn krylov_schur(
                 acc.sqrt()
             })
             .collect();
-        let converged = (0..k).filter(|&i| resid[i] <= p.tol * theta[i].abs()).count();
+        let converged = (0..k)
+            .filter(|&i| resid[i] <= p.tol * theta[i].abs())
+            .count();
         if converged == k || restarts >= p.max_restarts {
             if converged < k {
                 return Err(Error::NoConvergence {
@@ -367,8 +381,17 @@ fn restart_in_place(v: &mut [f64], n: usize, m: usize, y: MatRef<'_, f64>, par: 
     while r0 < n {
         let rows = CHUNK.min(n - r0);
         let mut t = tmp.as_mut().subrows_mut(0, rows);
-        matmul(t.rb_mut(), Accum::Replace, vm.rb().submatrix(r0, 0, rows, m), y, 1.0, par);
-        vm.rb_mut().submatrix_mut(r0, 0, rows, keep).copy_from(t.rb());
+        matmul(
+            t.rb_mut(),
+            Accum::Replace,
+            vm.rb().submatrix(r0, 0, rows, m),
+            y,
+            1.0,
+            par,
+        );
+        vm.rb_mut()
+            .submatrix_mut(r0, 0, rows, keep)
+            .copy_from(t.rb());
         r0 += rows;
     }
 }
@@ -377,11 +400,27 @@ fn restart_in_place(v: &mut [f64], n: usize, m: usize, y: MatRef<'_, f64>, par: 
 /// block `w` (one classical Gram–Schmidt pass as two GEMMs), adding the
 /// coefficients to rows `lo..hi` of `coef`.
 #[allow(clippy::too_many_arguments)]
-fn project_out(v: &[f64], n: usize, lo: usize, hi: usize, w: &mut [f64], b: usize, coef: &mut Mat<f64>, par: faer::Par) {
+fn project_out(
+    v: &[f64],
+    n: usize,
+    lo: usize,
+    hi: usize,
+    w: &mut [f64],
+    b: usize,
+    coef: &mut Mat<f64>,
+    par: faer::Par,
+) {
     let vb = MatRef::from_column_major_slice(&v[lo * n..hi * n], n, hi - lo);
     let mut wm = MatMut::from_column_major_slice_mut(w, n, b);
     let mut c = Mat::<f64>::zeros(hi - lo, b);
-    matmul(c.as_mut(), Accum::Replace, vb.transpose(), wm.rb(), 1.0, par);
+    matmul(
+        c.as_mut(),
+        Accum::Replace,
+        vb.transpose(),
+        wm.rb(),
+        1.0,
+        par,
+    );
     matmul(wm.rb_mut(), Accum::Add, vb, c.as_ref(), -1.0, par);
     for j in 0..b {
         for i in 0..hi - lo {
@@ -405,8 +444,17 @@ fn dot(x: &[f64], y: &[f64]) -> f64 {
 /// Orthonormalizes columns `start..start+b` of the column-major `v` (n
 /// rows) among themselves (twice-iterated modified Gram–Schmidt), writing
 /// the upper-triangular R with `old = Q R`. Used for the start block.
-fn orthonormalize_block(v: &mut [f64], n: usize, start: usize, b: usize, r: &mut Mat<f64>, rng: &mut SplitMix) {
-    let pre: Vec<f64> = (0..b).map(|j| norm(&v[(start + j) * n..(start + j + 1) * n])).collect();
+fn orthonormalize_block(
+    v: &mut [f64],
+    n: usize,
+    start: usize,
+    b: usize,
+    r: &mut Mat<f64>,
+    rng: &mut SplitMix,
+) {
+    let pre: Vec<f64> = (0..b)
+        .map(|j| norm(&v[(start + j) * n..(start + j + 1) * n]))
+        .collect();
     orthonormalize_against(v, n, start, b, &pre, r, rng);
 }
 

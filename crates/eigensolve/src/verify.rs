@@ -8,7 +8,11 @@ use nalgebra::{DMatrix, DVector};
 use crate::EigenProblem;
 
 /// `‖Lφᵢ − λᵢMφᵢ‖_{M⁻¹}` for every column.
-pub(crate) fn residuals(problem: &EigenProblem<'_>, lambda: &DVector<f64>, phi: &DMatrix<f64>) -> Vec<f64> {
+pub(crate) fn residuals(
+    problem: &EigenProblem<'_>,
+    lambda: &DVector<f64>,
+    phi: &DMatrix<f64>,
+) -> Vec<f64> {
     let n = problem.n();
     let k = phi.ncols();
     let l = problem.stiffness();
@@ -49,7 +53,14 @@ pub(crate) fn orthonormality_error(mass: &[f64], phi: &DMatrix<f64>, threads: us
     let a = MatRef::from_column_major_slice(phi.as_slice(), n, k);
     let b = MatRef::from_column_major_slice(mphi.as_slice(), n, k);
     let mut g = faer::Mat::<f64>::zeros(k, k);
-    matmul(&mut g, Accum::Replace, a.transpose(), b, 1.0, crate::factor::par_of(threads));
+    matmul(
+        &mut g,
+        Accum::Replace,
+        a.transpose(),
+        b,
+        1.0,
+        crate::factor::par_of(threads),
+    );
     let mut e = 0.0f64;
     for i in 0..k {
         for j in 0..k {

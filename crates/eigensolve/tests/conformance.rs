@@ -8,15 +8,19 @@
 
 use fmaps_eigensolve::*;
 use fmaps_laplacian::{LaplaceOperator, LaplacianParams, cotan_laplacian};
-use fmaps_mesh_io::generate::{disjoint_union, grid, icosphere, torus, translated};
 use fmaps_mesh_io::TriMesh;
+use fmaps_mesh_io::generate::{disjoint_union, grid, icosphere, torus, translated};
 use nalgebra::DMatrix;
 
 fn backends() -> Vec<Box<dyn EigenSolver>> {
     let mut v: Vec<Box<dyn EigenSolver>> = vec![
         Box::new(NativeSolver::default()),
         // A smaller block and a tight basis: many restarts.
-        Box::new(NativeSolver::new(NativeParams { block_size: 5, subspace: Some(1), ..Default::default() })),
+        Box::new(NativeSolver::new(NativeParams {
+            block_size: 5,
+            subspace: Some(1),
+            ..Default::default()
+        })),
         Box::new(NativeSolver::new(NativeParams {
             factorization: fmaps_eigensolve::Factorization::Simplicial,
             threads: 2,
@@ -35,23 +39,38 @@ fn op(mesh: &TriMesh) -> LaplaceOperator {
 
 fn solve(s: &dyn EigenSolver, op: &LaplaceOperator, k: usize) -> SpectralBasis {
     let problem = EigenProblem::new(op.stiffness.view(), &op.mass).unwrap();
-    s.solve(&problem, k).unwrap_or_else(|e| panic!("{}: {e}", s.name()))
+    s.solve(&problem, k)
+        .unwrap_or_else(|e| panic!("{}: {e}", s.name()))
 }
 
 /// Checks the basis contract: ascending, M-orthonormal, small residuals.
 fn check_contract(name: &str, b: &SpectralBasis) {
     let ev = &b.eigenvalues;
-    assert!(ev.iter().zip(ev.iter().skip(1)).all(|(a, c)| a <= c), "{name}: not ascending");
-    assert!(b.report.orthonormality_error < 1e-10, "{name}: orthonormality {}", b.report.orthonormality_error);
+    assert!(
+        ev.iter().zip(ev.iter().skip(1)).all(|(a, c)| a <= c),
+        "{name}: not ascending"
+    );
+    assert!(
+        b.report.orthonormality_error < 1e-10,
+        "{name}: orthonormality {}",
+        b.report.orthonormality_error
+    );
     // Direct check of ΦᵀMΦ = I, independent of the report.
     let mut mphi = b.eigenvectors.clone();
     for mut c in mphi.column_iter_mut() {
         c.component_mul_assign(&b.mass);
     }
     let g = b.eigenvectors.tr_mul(&mphi);
-    assert!((g - DMatrix::identity(b.k(), b.k())).amax() < 1e-10, "{name}: ΦᵀMΦ ≠ I");
+    assert!(
+        (g - DMatrix::identity(b.k(), b.k())).amax() < 1e-10,
+        "{name}: ΦᵀMΦ ≠ I"
+    );
     let scale = ev[ev.len() - 1].abs().max(1.0);
-    assert!(b.report.max_residual() < 1e-6 * scale, "{name}: max residual {}", b.report.max_residual());
+    assert!(
+        b.report.max_residual() < 1e-6 * scale,
+        "{name}: max residual {}",
+        b.report.max_residual()
+    );
 }
 
 /// Cosines of the principal angles between the spans of two M-orthonormal
@@ -82,12 +101,25 @@ fn sphere_spectrum_groups_as_l_l_plus_1() {
             for &lam in group {
                 // The cotan discretization error grows like (l h)²; at 642
                 // vertices it is 2.6% for l = 4 (dense reference agrees).
-                assert!((lam - exact).abs() <= 0.03 * exact + 1e-9, "{}: λ = {lam}, l = {l}: {exact}", s.name());
+                assert!(
+                    (lam - exact).abs() <= 0.03 * exact + 1e-9,
+                    "{}: λ = {lam}, l = {l}: {exact}",
+                    s.name()
+                );
             }
             // Multiplicity 2l+1: the whole group lies above the previous one.
-            let (lo, hi) = group.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, c), &x| (a.min(x), c.max(x)));
+            let (lo, hi) = group
+                .iter()
+                .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, c), &x| {
+                    (a.min(x), c.max(x))
+                });
             assert!(lo > prev_max, "{}: group l={l} overlaps", s.name());
-            assert!(hi - lo < 0.05 * exact + 1e-9, "{}: group l={l} spread {}", s.name(), hi - lo);
+            assert!(
+                hi - lo < 0.05 * exact + 1e-9,
+                "{}: group l={l} spread {}",
+                s.name(),
+                hi - lo
+            );
             prev_max = hi;
             i += 2 * l + 1;
         }
@@ -107,7 +139,10 @@ fn backends_agree_with_the_dense_reference() {
         // Spans are only defined at a gap: take the largest k <= target
         // with a relative gap above 1e-4 (the torus has double eigenvalues).
         let ev = &reference.eigenvalues;
-        let k = (2..=target).rev().find(|&k| ev[k] - ev[k - 1] > 1e-4 * ev[k]).unwrap();
+        let k = (2..=target)
+            .rev()
+            .find(|&k| ev[k] - ev[k - 1] > 1e-4 * ev[k])
+            .unwrap();
         for s in backends() {
             let name = format!("{} on {mname}", s.name());
             let b = solve(s.as_ref(), &o, k);
@@ -115,10 +150,16 @@ fn backends_agree_with_the_dense_reference() {
             let ref_k = reference.truncate(k);
             for i in 0..k {
                 let (x, y) = (b.eigenvalues[i], ref_k.eigenvalues[i]);
-                assert!((x - y).abs() <= 1e-8 * y.abs().max(1.0), "{name}: λ_{i} {x} vs {y}");
+                assert!(
+                    (x - y).abs() <= 1e-8 * y.abs().max(1.0),
+                    "{name}: λ_{i} {x} vs {y}"
+                );
             }
             let cos = min_subspace_cosine(&b, &ref_k);
-            assert!(cos > 1.0 - 1e-8, "{name}: subspaces differ, min cosine {cos}");
+            assert!(
+                cos > 1.0 - 1e-8,
+                "{name}: subspaces differ, min cosine {cos}"
+            );
         }
     }
 }
@@ -131,7 +172,12 @@ fn two_disjoint_spheres_have_two_zero_eigenvalues() {
     for s in backends() {
         let b = solve(s.as_ref(), &o, 8);
         check_contract(s.name(), &b);
-        assert!(b.eigenvalues[0].abs() < 1e-9 && b.eigenvalues[1].abs() < 1e-9, "{}: {}", s.name(), b.eigenvalues);
+        assert!(
+            b.eigenvalues[0].abs() < 1e-9 && b.eigenvalues[1].abs() < 1e-9,
+            "{}: {}",
+            s.name(),
+            b.eigenvalues
+        );
         assert!(b.eigenvalues[2] > 1.0, "{}", s.name());
     }
 }
@@ -154,46 +200,127 @@ fn bad_input_is_an_error() {
     let n = o.n();
     let problem = EigenProblem::new(o.stiffness.view(), &o.mass).unwrap();
     for s in backends() {
-        assert_eq!(s.solve(&problem, n).unwrap_err(), Error::InvalidK { k: n, n }, "{}", s.name());
-        assert_eq!(s.solve(&problem, n + 5).unwrap_err(), Error::InvalidK { k: n + 5, n });
-        assert_eq!(s.solve(&problem, 0).unwrap_err(), Error::InvalidK { k: 0, n });
+        assert_eq!(
+            s.solve(&problem, n).unwrap_err(),
+            Error::InvalidK { k: n, n },
+            "{}",
+            s.name()
+        );
+        assert_eq!(
+            s.solve(&problem, n + 5).unwrap_err(),
+            Error::InvalidK { k: n + 5, n }
+        );
+        assert_eq!(
+            s.solve(&problem, 0).unwrap_err(),
+            Error::InvalidK { k: 0, n }
+        );
     }
     let mut bad = o.stiffness.clone();
     bad.data_mut()[3] = f64::NAN;
-    assert!(matches!(EigenProblem::new(bad.view(), &o.mass), Err(Error::NonFiniteStiffness { .. })));
+    assert!(matches!(
+        EigenProblem::new(bad.view(), &o.mass),
+        Err(Error::NonFiniteStiffness { .. })
+    ));
     let mut asym = o.stiffness.clone();
     asym.data_mut()[1] += 0.5;
-    assert!(matches!(EigenProblem::new(asym.view(), &o.mass), Err(Error::NotSymmetric { .. })));
+    assert!(matches!(
+        EigenProblem::new(asym.view(), &o.mass),
+        Err(Error::NotSymmetric { .. })
+    ));
     let mut mass = o.mass.clone();
     mass[7] = 0.0;
     assert_eq!(
         EigenProblem::new(o.stiffness.view(), &mass).unwrap_err(),
-        Error::NonPositiveMass { index: 7, value: 0.0 }
+        Error::NonPositiveMass {
+            index: 7,
+            value: 0.0
+        }
     );
     mass[7] = -1.0;
-    assert!(matches!(EigenProblem::new(o.stiffness.view(), &mass), Err(Error::NonPositiveMass { index: 7, .. })));
+    assert!(matches!(
+        EigenProblem::new(o.stiffness.view(), &mass),
+        Err(Error::NonPositiveMass { index: 7, .. })
+    ));
     mass[7] = f64::INFINITY;
-    assert!(matches!(EigenProblem::new(o.stiffness.view(), &mass), Err(Error::NonPositiveMass { index: 7, .. })));
-    assert!(matches!(EigenProblem::new(o.stiffness.view(), &o.mass[1..]), Err(Error::SizeMismatch { .. })));
+    assert!(matches!(
+        EigenProblem::new(o.stiffness.view(), &mass),
+        Err(Error::NonPositiveMass { index: 7, .. })
+    ));
+    assert!(matches!(
+        EigenProblem::new(o.stiffness.view(), &o.mass[1..]),
+        Err(Error::SizeMismatch { .. })
+    ));
     // A positive shift inside the spectrum makes L − σM indefinite.
-    let positive = NativeSolver::new(NativeParams { shift: Some(5.0), ..Default::default() });
-    assert!(matches!(positive.solve(&problem, 4), Err(Error::NotPositiveDefinite { .. })));
+    let positive = NativeSolver::new(NativeParams {
+        shift: Some(5.0),
+        ..Default::default()
+    });
+    assert!(matches!(
+        positive.solve(&problem, 4),
+        Err(Error::NotPositiveDefinite { .. })
+    ));
+    let rect = sprs::CsMat::new_csc((3, 2), vec![0, 1, 2], vec![0, 1], vec![1.0, 1.0]);
+    assert_eq!(
+        EigenProblem::new(rect.view(), &[1.0, 1.0, 1.0]).unwrap_err(),
+        Error::NotSquare { rows: 3, cols: 2 }
+    );
+    for bad in [
+        NativeParams {
+            tol: 0.0,
+            ..Default::default()
+        },
+        NativeParams {
+            tol: 1.5,
+            ..Default::default()
+        },
+        NativeParams {
+            block_size: 0,
+            ..Default::default()
+        },
+        NativeParams {
+            shift: Some(f64::NAN),
+            ..Default::default()
+        },
+    ] {
+        assert!(
+            matches!(
+                NativeSolver::new(bad.clone()).solve(&problem, 4),
+                Err(Error::InvalidParameter(_))
+            ),
+            "{bad:?}"
+        );
+    }
     let dense = DenseSolver { max_n: 10 };
-    assert!(matches!(dense.solve(&problem, 4), Err(Error::TooLargeForDense { .. })));
+    assert!(matches!(
+        dense.solve(&problem, 4),
+        Err(Error::TooLargeForDense { .. })
+    ));
     // An indefinite "stiffness" is caught by the factorization.
     let mut neg = o.stiffness.clone();
     neg.data_mut().iter_mut().for_each(|v| *v = -*v);
     let p = EigenProblem::new(neg.view(), &o.mass).unwrap();
-    assert!(matches!(NativeSolver::default().solve(&p, 4), Err(Error::NotPositiveDefinite { .. })));
+    assert!(matches!(
+        NativeSolver::default().solve(&p, 4),
+        Err(Error::NotPositiveDefinite { .. })
+    ));
 }
 
 #[test]
 fn no_convergence_is_reported_not_hidden() {
     let o = op(&icosphere(1.0, 3));
     let problem = EigenProblem::new(o.stiffness.view(), &o.mass).unwrap();
-    let s = NativeSolver::new(NativeParams { max_restarts: 0, tol: 1e-15, subspace: Some(30), ..Default::default() });
+    let s = NativeSolver::new(NativeParams {
+        max_restarts: 0,
+        tol: 1e-15,
+        subspace: Some(30),
+        ..Default::default()
+    });
     match s.solve(&problem, 20) {
-        Err(Error::NoConvergence { wanted: 20, converged, .. }) => assert!(converged < 20),
+        Err(Error::NoConvergence {
+            wanted: 20,
+            converged,
+            ..
+        }) => assert!(converged < 20),
         other => panic!("expected NoConvergence, got {other:?}"),
     }
 }
@@ -207,7 +334,11 @@ fn small_problems_and_k_close_to_n() {
         let b = solve(&NativeSolver::default(), &o, k);
         check_contract("native small", &b);
         for i in 0..k {
-            assert!((b.eigenvalues[i] - reference.eigenvalues[i]).abs() < 1e-9 * reference.eigenvalues[i].max(1.0), "k={k} i={i}");
+            assert!(
+                (b.eigenvalues[i] - reference.eigenvalues[i]).abs()
+                    < 1e-9 * reference.eigenvalues[i].max(1.0),
+                "k={k} i={i}"
+            );
         }
     }
 }
@@ -226,6 +357,9 @@ fn basis_projection_helpers() {
     let ppf = b.reconstruct(&b.project(&pf));
     assert!((pf - ppf).amax() < 1e-10);
     let t = b.truncate(4);
-    assert_eq!((t.k(), t.eigenvalues.len(), t.report.residuals.len()), (4, 4, 4));
+    assert_eq!(
+        (t.k(), t.eigenvalues.len(), t.report.residuals.len()),
+        (4, 4, 4)
+    );
     assert_eq!(t.eigenvectors.column(3), b.eigenvectors.column(3));
 }

@@ -64,7 +64,11 @@ impl std::str::FromStr for Backend {
 
 impl Backend {
     /// Builds the solver, or explains why it is not available.
-    pub fn solver(self, threads: usize, block_size: Option<usize>) -> Result<Box<dyn EigenSolver>, eigensolve::Error> {
+    pub fn solver(
+        self,
+        threads: usize,
+        block_size: Option<usize>,
+    ) -> Result<Box<dyn EigenSolver>, eigensolve::Error> {
         match self {
             Backend::Native => {
                 let d = NativeParams::default();
@@ -79,7 +83,8 @@ impl Backend {
             Backend::Arpack => Ok(Box::new(eigensolve::ArpackSolver::default())),
             #[cfg(not(feature = "arpack"))]
             Backend::Arpack => Err(eigensolve::Error::InvalidParameter(
-                "this fmaps was built without the ARPACK backend; rebuild with `--features arpack`".into(),
+                "this fmaps was built without the ARPACK backend; rebuild with `--features arpack`"
+                    .into(),
             )),
         }
     }
@@ -122,17 +127,27 @@ pub struct Spectrum {
 
 /// The first `k` Laplace–Beltrami eigenpairs of a mesh: cotangent
 /// Laplacian, then the chosen eigensolver.
-pub fn spectrum(mesh: &TriMesh, k: usize, params: &SpectrumParams) -> Result<Spectrum, eigensolve::Error> {
+pub fn spectrum(
+    mesh: &TriMesh,
+    k: usize,
+    params: &SpectrumParams,
+) -> Result<Spectrum, eigensolve::Error> {
     let t = Instant::now();
     let op = laplacian::cotan_laplacian(mesh, &LaplacianParams::with_mass(params.mass));
     let lap = t.elapsed().as_secs_f64();
     let problem = EigenProblem::new(op.stiffness.view(), &op.mass)?;
-    let solver = params.backend.solver(params.threads.max(1), params.block_size)?;
+    let solver = params
+        .backend
+        .solver(params.threads.max(1), params.block_size)?;
     let basis = solver.solve(&problem, k)?;
     let times = StageTimes {
         laplacian: lap,
         factorization: basis.report.factorization_seconds,
         eigensolve: basis.report.iteration_seconds,
     };
-    Ok(Spectrum { basis, skipped_faces: op.skipped_faces, times })
+    Ok(Spectrum {
+        basis,
+        skipped_faces: op.skipped_faces,
+        times,
+    })
 }

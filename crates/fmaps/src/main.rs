@@ -12,7 +12,11 @@ use fmaps::{Backend, SpectrumParams};
 use serde_json::json;
 
 #[derive(Parser)]
-#[command(name = "fmaps", version, about = "Non-rigid 3D shape matching with functional maps")]
+#[command(
+    name = "fmaps",
+    version,
+    about = "Non-rigid 3D shape matching with functional maps"
+)]
 struct Cli {
     #[command(subcommand)]
     command: Command,
@@ -30,9 +34,11 @@ enum Command {
         json: bool,
     },
     /// The first k Laplace–Beltrami eigenpairs of a mesh (L φ = λ M φ).
-    #[command(after_help = "Examples:\n  fmaps spectrum --builtin sphere --k 36\n  fmaps spectrum tr_reg_000.off --k 100 --json --out basis.npy\n\n\
+    #[command(
+        after_help = "Examples:\n  fmaps spectrum --builtin sphere --k 36\n  fmaps spectrum tr_reg_000.off --k 100 --json --out basis.npy\n\n\
 --out FILE.npy writes the eigenvectors (n x k, float64), FILE_eigenvalues.npy (k) and FILE_mass.npy\n\
-(n, the lumped mass diagonal); in Python: phi = np.load('FILE.npy'), and phi.T @ (mass[:, None] * phi) = I.")]
+(n, the lumped mass diagonal); in Python: phi = np.load('FILE.npy'), and phi.T @ (mass[:, None] * phi) = I."
+    )]
     Spectrum {
         /// Mesh file (.off, .obj, .ply); omit with --builtin.
         #[arg(required_unless_present = "builtin")]
@@ -112,9 +118,27 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Info { mesh, json } => info(&mesh, json),
-        Command::Spectrum { mesh, builtin, k, backend, mass, threads, block_size, json, out } => {
-            spectrum(mesh.as_deref(), builtin, k, backend, mass, threads, block_size, json, out.as_deref())
-        }
+        Command::Spectrum {
+            mesh,
+            builtin,
+            k,
+            backend,
+            mass,
+            threads,
+            block_size,
+            json,
+            out,
+        } => spectrum(
+            mesh.as_deref(),
+            builtin,
+            k,
+            backend,
+            mass,
+            threads,
+            block_size,
+            json,
+            out.as_deref(),
+        ),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
@@ -139,32 +163,82 @@ fn info(path: &Path, json: bool) -> Result<(), Failure> {
         v["is_manifold"] = json!(r.is_manifold());
         v["is_closed_manifold"] = json!(r.is_closed_manifold());
         v["is_clean"] = json!(r.is_clean());
-        return emit(&format!("{}\n", serde_json::to_string_pretty(&v).map_err(runtime)?));
+        return emit(&format!(
+            "{}\n",
+            serde_json::to_string_pretty(&v).map_err(runtime)?
+        ));
     }
     let list = |v: &[usize]| -> String {
         if v.is_empty() {
             "none".into()
         } else {
             let head: Vec<String> = v.iter().take(8).map(|x| x.to_string()).collect();
-            format!("{} ({}{})", v.len(), head.join(", "), if v.len() > 8 { ", ..." } else { "" })
+            format!(
+                "{} ({}{})",
+                v.len(),
+                head.join(", "),
+                if v.len() > 8 { ", ..." } else { "" }
+            )
         }
     };
     outln!(o, "{}", path.display());
-    outln!(o, "  vertices {}  faces {}  edges {}", r.n_vertices, r.n_faces, r.n_edges);
-    outln!(o, "  area {:.6}  bounding box {:?} .. {:?}", r.area, r.bounding_box[0], r.bounding_box[1]);
-    outln!(o, "  connected components {}  boundary loops {} ({} edges)", r.connected_components, r.boundary_loops, r.boundary_edges);
-    outln!(o, 
+    outln!(
+        o,
+        "  vertices {}  faces {}  edges {}",
+        r.n_vertices,
+        r.n_faces,
+        r.n_edges
+    );
+    outln!(
+        o,
+        "  area {:.6}  bounding box {:?} .. {:?}",
+        r.area,
+        r.bounding_box[0],
+        r.bounding_box[1]
+    );
+    outln!(
+        o,
+        "  connected components {}  boundary loops {} ({} edges)",
+        r.connected_components,
+        r.boundary_loops,
+        r.boundary_edges
+    );
+    outln!(
+        o,
         "  Euler characteristic {}  genus {}",
         r.euler_characteristic,
-        r.genus.map_or("undefined (not a manifold)".into(), |g| g.to_string())
+        r.genus
+            .map_or("undefined (not a manifold)".into(), |g| g.to_string())
     );
     outln!(o, "  degenerate faces {}", list(&r.degenerate_faces));
     outln!(o, "  duplicate faces {}", list(&r.duplicate_faces));
     outln!(o, "  non-manifold edges {}", r.non_manifold_edges.len());
-    outln!(o, "  non-manifold vertices {}", list(&r.non_manifold_vertices));
-    outln!(o, "  unreferenced vertices {}", list(&r.unreferenced_vertices));
-    outln!(o, "  inconsistently oriented edges {}", r.inconsistently_oriented_edges);
-    outln!(o, "  verdict: {}", if r.is_clean() { "clean manifold mesh" } else if r.is_manifold() { "manifold, with the defects above" } else { "NOT a manifold" });
+    outln!(
+        o,
+        "  non-manifold vertices {}",
+        list(&r.non_manifold_vertices)
+    );
+    outln!(
+        o,
+        "  unreferenced vertices {}",
+        list(&r.unreferenced_vertices)
+    );
+    outln!(
+        o,
+        "  inconsistently oriented edges {}",
+        r.inconsistently_oriented_edges
+    );
+    outln!(
+        o,
+        "  verdict: {}",
+        if r.is_clean() {
+            "clean manifold mesh"
+        } else if r.is_manifold() {
+            "manifold, with the defects above"
+        } else {
+            "NOT a manifold"
+        }
+    );
     emit(&o)
 }
 
@@ -183,8 +257,14 @@ fn spectrum(
     let t = Instant::now();
     let (name, mesh) = match (path, builtin) {
         (Some(p), _) => (p.display().to_string(), load(p)?),
-        (None, Some(Builtin::Sphere)) => ("builtin unit sphere (icosphere, 5 subdivisions)".to_string(), mesh_io::generate::icosphere(1.0, 5)),
-        (None, Some(Builtin::Torus)) => ("builtin torus R=1, r=0.4".to_string(), mesh_io::generate::torus(1.0, 0.4, 160, 64)),
+        (None, Some(Builtin::Sphere)) => (
+            "builtin unit sphere (icosphere, 5 subdivisions)".to_string(),
+            mesh_io::generate::icosphere(1.0, 5),
+        ),
+        (None, Some(Builtin::Torus)) => (
+            "builtin torus R=1, r=0.4".to_string(),
+            mesh_io::generate::torus(1.0, 0.4, 160, 64),
+        ),
         (None, None) => return Err(input(anyhow::anyhow!("give a mesh file or --builtin"))),
     };
     let load_s = t.elapsed().as_secs_f64();
@@ -205,11 +285,16 @@ fn spectrum(
     })?;
     let b = &s.basis;
     if let Some(out) = out {
-        write_basis(out, b).with_context(|| format!("writing {}", out.display())).map_err(runtime)?;
+        write_basis(out, b)
+            .with_context(|| format!("writing {}", out.display()))
+            .map_err(runtime)?;
     }
     let peak = peak_rss_mb();
     let exact: Option<Vec<f64>> = matches!(builtin, Some(Builtin::Sphere)).then(|| {
-        (0..).flat_map(|l: usize| std::iter::repeat_n((l * (l + 1)) as f64, 2 * l + 1)).take(k).collect()
+        (0..)
+            .flat_map(|l: usize| std::iter::repeat_n((l * (l + 1)) as f64, 2 * l + 1))
+            .take(k)
+            .collect()
     });
     let mut o = String::new();
     if json {
@@ -231,17 +316,34 @@ fn spectrum(
             "eigenvalues": b.eigenvalues.as_slice(),
             "residuals": b.report.residuals,
         });
-        return emit(&format!("{}\n", serde_json::to_string(&v).map_err(runtime)?));
+        return emit(&format!(
+            "{}\n",
+            serde_json::to_string(&v).map_err(runtime)?
+        ));
     }
-    outln!(o, "{name}: {} vertices, {} faces", mesh.n_vertices(), mesh.n_faces());
-    if !s.skipped_faces.is_empty() {
-        outln!(o, "warning: {} degenerate faces were left out of the Laplacian", s.skipped_faces.len());
-    }
-    outln!(o, 
-        "{} backend, k = {k}, shift {:.4}: {} restarts, {} operator applications",
-        b.report.backend, b.report.shift, b.report.restarts, b.report.operator_applications
+    outln!(
+        o,
+        "{name}: {} vertices, {} faces",
+        mesh.n_vertices(),
+        mesh.n_faces()
     );
-    outln!(o, 
+    if !s.skipped_faces.is_empty() {
+        outln!(
+            o,
+            "warning: {} degenerate faces were left out of the Laplacian",
+            s.skipped_faces.len()
+        );
+    }
+    outln!(
+        o,
+        "{} backend, k = {k}, shift {:.4}: {} restarts, {} operator applications",
+        b.report.backend,
+        b.report.shift,
+        b.report.restarts,
+        b.report.operator_applications
+    );
+    outln!(
+        o,
         "seconds: load {:.3}  laplacian {:.4}  factorization {:.3}  eigensolve {:.3}  (peak memory {})",
         load_s,
         s.times.laplacian,
@@ -249,7 +351,8 @@ fn spectrum(
         s.times.eigensolve,
         peak.map_or("n/a".into(), |m| format!("{m:.0} MB"))
     );
-    outln!(o, 
+    outln!(
+        o,
         "max residual ‖Lφ − λMφ‖_M⁻¹ = {:.2e}, max |ΦᵀMΦ − I| = {:.2e}",
         b.report.max_residual(),
         b.report.orthonormality_error
@@ -258,7 +361,11 @@ fn spectrum(
         Some(ex) => {
             outln!(o, "   i   eigenvalue          exact l(l+1)   rel. error");
             for (i, (l, e)) in b.eigenvalues.iter().zip(ex).enumerate() {
-                let rel = if *e > 0.0 { format!("{:.2e}", (l - e).abs() / e) } else { "-".into() };
+                let rel = if *e > 0.0 {
+                    format!("{:.2e}", (l - e).abs() / e)
+                } else {
+                    "-".into()
+                };
                 outln!(o, "{i:4}   {l:<18.10} {e:<14} {rel}");
             }
         }

@@ -12,10 +12,21 @@ use std::path::Path;
 /// If `data.len()` is not the product of `shape`.
 #[track_caller]
 pub fn write_f64<W: Write>(w: &mut W, shape: &[usize], data: &[f64]) -> io::Result<()> {
-    assert_eq!(shape.iter().product::<usize>(), data.len(), "npy: shape does not match data");
+    assert_eq!(
+        shape.iter().product::<usize>(),
+        data.len(),
+        "npy: shape does not match data"
+    );
     let dims = match shape {
         [n] => format!("({n},)"),
-        _ => format!("({})", shape.iter().map(|d| d.to_string()).collect::<Vec<_>>().join(", ")),
+        _ => format!(
+            "({})",
+            shape
+                .iter()
+                .map(|d| d.to_string())
+                .collect::<Vec<_>>()
+                .join(", ")
+        ),
     };
     let mut header = format!("{{'descr': '<f8', 'fortran_order': True, 'shape': {dims}, }}");
     // Magic (6) + version (2) + header length (2) + header + '\n' must be a
@@ -52,10 +63,17 @@ mod tests {
         assert!(header.contains("'shape': (2, 3)") && header.contains("'fortran_order': True"));
         assert!(header.ends_with('\n'));
         assert_eq!(out.len(), 10 + hlen + 48);
-        assert_eq!(f64::from_le_bytes(out[10 + hlen..18 + hlen].try_into().unwrap()), 1.0);
+        assert_eq!(
+            f64::from_le_bytes(out[10 + hlen..18 + hlen].try_into().unwrap()),
+            1.0
+        );
         let mut v = Vec::new();
         super::write_f64(&mut v, &[3], &[1.0, 2.0, 3.0]).unwrap();
         let h = u16::from_le_bytes([v[8], v[9]]) as usize;
-        assert!(std::str::from_utf8(&v[10..10 + h]).unwrap().contains("'shape': (3,)"));
+        assert!(
+            std::str::from_utf8(&v[10..10 + h])
+                .unwrap()
+                .contains("'shape': (3,)")
+        );
     }
 }

@@ -15,8 +15,15 @@ fn tmpdir(name: &str) -> PathBuf {
 
 #[test]
 fn spectrum_of_the_builtin_sphere() {
-    let out = fmaps().args(["spectrum", "--builtin", "sphere", "--k", "9", "--json"]).output().unwrap();
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let out = fmaps()
+        .args(["spectrum", "--builtin", "sphere", "--k", "9", "--json"])
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     let ev: Vec<f64> = serde_json::from_value(v["eigenvalues"].clone()).unwrap();
     assert_eq!(ev.len(), 9);
@@ -27,9 +34,15 @@ fn spectrum_of_the_builtin_sphere() {
     assert!(v["orthonormality_error"].as_f64().unwrap() < 1e-10);
     assert_eq!(v["backend"], "native");
     // The text report shows the closed form next to each eigenvalue.
-    let text = fmaps().args(["spectrum", "--builtin", "sphere", "--k", "4"]).output().unwrap();
+    let text = fmaps()
+        .args(["spectrum", "--builtin", "sphere", "--k", "4"])
+        .output()
+        .unwrap();
     let s = String::from_utf8(text.stdout).unwrap();
-    assert!(s.contains("exact l(l+1)") && s.contains("10242 vertices"), "{s}");
+    assert!(
+        s.contains("exact l(l+1)") && s.contains("10242 vertices"),
+        "{s}"
+    );
 }
 
 #[test]
@@ -39,7 +52,14 @@ fn spectrum_writes_npy_files() {
     fmaps::mesh_io::write_mesh(&mesh, &fmaps::mesh_io::generate::torus(2.0, 0.5, 20, 10)).unwrap();
     let out = dir.join("basis.npy");
     let st = fmaps()
-        .args(["spectrum", mesh.to_str().unwrap(), "--k", "12", "--out", out.to_str().unwrap()])
+        .args([
+            "spectrum",
+            mesh.to_str().unwrap(),
+            "--k",
+            "12",
+            "--out",
+            out.to_str().unwrap(),
+        ])
         .status()
         .unwrap();
     assert!(st.success());
@@ -47,7 +67,10 @@ fn spectrum_writes_npy_files() {
         let b = std::fs::read(&p).unwrap();
         assert_eq!(&b[..6], b"\x93NUMPY", "{}", p.display());
         let h = u16::from_le_bytes([b[8], b[9]]) as usize;
-        (String::from_utf8(b[10..10 + h].to_vec()).unwrap(), b.len() - 10 - h)
+        (
+            String::from_utf8(b[10..10 + h].to_vec()).unwrap(),
+            b.len() - 10 - h,
+        )
     };
     let (h, bytes) = header_len(out.clone());
     assert!(h.contains("(200, 12)") && bytes == 200 * 12 * 8, "{h}");
@@ -63,15 +86,25 @@ fn info_reports_json_and_text() {
     let dir = tmpdir("info");
     let mesh = dir.join("grid.ply");
     fmaps::mesh_io::write_mesh(&mesh, &fmaps::mesh_io::generate::grid(1.0, 1.0, 3, 3)).unwrap();
-    let out = fmaps().args(["info", mesh.to_str().unwrap(), "--json"]).output().unwrap();
+    let out = fmaps()
+        .args(["info", mesh.to_str().unwrap(), "--json"])
+        .output()
+        .unwrap();
     assert!(out.status.success());
     let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     assert_eq!(v["n_vertices"], 16);
     assert_eq!(v["boundary_loops"], 1);
     assert_eq!(v["genus"], 0);
     assert_eq!(v["is_clean"], true);
-    let text = fmaps().args(["info", mesh.to_str().unwrap()]).output().unwrap();
-    assert!(String::from_utf8(text.stdout).unwrap().contains("boundary loops 1"));
+    let text = fmaps()
+        .args(["info", mesh.to_str().unwrap()])
+        .output()
+        .unwrap();
+    assert!(
+        String::from_utf8(text.stdout)
+            .unwrap()
+            .contains("boundary loops 1")
+    );
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
@@ -80,15 +113,25 @@ fn bad_input_exits_with_2_and_a_clear_message() {
     let dir = tmpdir("bad");
     let bad = dir.join("bad.off");
     std::fs::write(&bad, "OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 9\n").unwrap();
-    for args in [vec!["info", bad.to_str().unwrap()], vec!["spectrum", bad.to_str().unwrap(), "--k", "2"]] {
+    for args in [
+        vec!["info", bad.to_str().unwrap()],
+        vec!["spectrum", bad.to_str().unwrap(), "--k", "2"],
+    ] {
         let out = fmaps().args(&args).output().unwrap();
         assert_eq!(out.status.code(), Some(2));
         let err = String::from_utf8(out.stderr).unwrap();
         assert!(err.contains("bad.off") && err.contains("line 6"), "{err}");
     }
-    let out = fmaps().args(["spectrum", "--builtin", "torus", "--k", "999999"]).output().unwrap();
+    let out = fmaps()
+        .args(["spectrum", "--builtin", "torus", "--k", "999999"])
+        .output()
+        .unwrap();
     assert_eq!(out.status.code(), Some(2));
-    assert!(String::from_utf8(out.stderr).unwrap().contains("need 1 <= k < n"));
+    assert!(
+        String::from_utf8(out.stderr)
+            .unwrap()
+            .contains("need 1 <= k < n")
+    );
     let out = fmaps().args(["spectrum"]).output().unwrap();
     assert_eq!(out.status.code(), Some(2), "usage errors exit with 2");
     std::fs::remove_dir_all(&dir).unwrap();

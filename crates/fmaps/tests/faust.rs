@@ -7,8 +7,12 @@ use std::path::PathBuf;
 fn data_dir() -> Option<PathBuf> {
     let dir = std::env::var_os("FMAPS_DATA")
         .map(PathBuf::from)
-        .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared/datasets"));
-    dir.join("bcicp/FAUST/vtx_5k/tr_reg_000.off").exists().then_some(dir)
+        .unwrap_or_else(|| {
+            PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared/datasets")
+        });
+    dir.join("bcicp/FAUST/vtx_5k/tr_reg_000.off")
+        .exists()
+        .then_some(dir)
 }
 
 #[test]
@@ -20,7 +24,8 @@ fn faust_mesh_spectrum() {
     let mesh = fmaps::mesh_io::read_mesh(dir.join("bcicp/FAUST/vtx_5k/tr_reg_000.off")).unwrap();
     let r = mesh.validate();
     assert!(r.is_clean() && r.genus == Some(0), "{r:?}");
-    let gt = fmaps::mesh_io::read_vts(dir.join("bcicp/FAUST/vtx_5k/corres/tr_reg_000.vts")).unwrap();
+    let gt =
+        fmaps::mesh_io::read_vts(dir.join("bcicp/FAUST/vtx_5k/corres/tr_reg_000.vts")).unwrap();
     fmaps::mesh_io::check_indices(&gt, mesh.n_vertices(), None).unwrap();
 
     let s = fmaps::spectrum(&mesh, 60, &fmaps::SpectrumParams::default()).unwrap();
@@ -31,7 +36,10 @@ fn faust_mesh_spectrum() {
 
     #[cfg(feature = "arpack")]
     {
-        let p = fmaps::SpectrumParams { backend: fmaps::Backend::Arpack, ..Default::default() };
+        let p = fmaps::SpectrumParams {
+            backend: fmaps::Backend::Arpack,
+            ..Default::default()
+        };
         let a = fmaps::spectrum(&mesh, 60, &p).unwrap();
         for i in 1..60 {
             let (x, y) = (b.eigenvalues[i], a.basis.eigenvalues[i]);

@@ -91,7 +91,12 @@ impl LaplaceOperator {
     /// The mass matrix as a sparse diagonal matrix (CSC).
     pub fn mass_matrix(&self) -> CsMat<f64> {
         let n = self.mass.len();
-        CsMat::new_csc((n, n), (0..=n).collect(), (0..n).collect(), self.mass.clone())
+        CsMat::new_csc(
+            (n, n),
+            (0..=n).collect(),
+            (0..n).collect(),
+            self.mass.clone(),
+        )
     }
 
     /// Number of vertices.
@@ -168,7 +173,11 @@ impl FaceGeometry {
             cot.push(c);
             area.push(0.5 * cr);
         }
-        Self { cot, area, degenerate }
+        Self {
+            cot,
+            area,
+            degenerate,
+        }
     }
 }
 

@@ -23,7 +23,10 @@ fn meshes() -> Vec<(&'static str, TriMesh)> {
         ("icosphere", s.clone()),
         ("torus", torus(2.0, 0.7, 14, 9)),
         ("grid (boundary)", grid(2.0, 1.0, 7, 5)),
-        ("two spheres", disjoint_union(&s, &translated(&s, [3.0, 0.0, 0.0]))),
+        (
+            "two spheres",
+            disjoint_union(&s, &translated(&s, [3.0, 0.0, 0.0])),
+        ),
         ("zero-area face", with_zero_area_face()),
     ]
 }
@@ -51,10 +54,17 @@ fn symmetric_zero_row_sums_psd_and_finite() {
                 assert!(l.row(i).sum().abs() <= 1e-13 * scale, "{name}: row {i} sum");
             }
             let eig = l.clone().symmetric_eigenvalues();
-            assert!(eig.min() >= -1e-12 * scale, "{name}: min eigenvalue {}", eig.min());
+            assert!(
+                eig.min() >= -1e-12 * scale,
+                "{name}: min eigenvalue {}",
+                eig.min()
+            );
             let area = mesh.area();
             let total: f64 = op.mass.iter().sum();
-            assert!((total - area).abs() <= 1e-12 * area, "{name} {kind:?}: {total} vs {area}");
+            assert!(
+                (total - area).abs() <= 1e-12 * area,
+                "{name} {kind:?}: {total} vs {area}"
+            );
         }
     }
 }
@@ -63,7 +73,14 @@ fn symmetric_zero_row_sums_psd_and_finite() {
 fn kernel_dimension_is_the_number_of_components() {
     for (name, mesh, comps) in [
         ("sphere", icosphere(1.0, 2), 1),
-        ("two spheres", disjoint_union(&icosphere(1.0, 1), &translated(&icosphere(1.0, 1), [3.0, 0.0, 0.0])), 2),
+        (
+            "two spheres",
+            disjoint_union(
+                &icosphere(1.0, 1),
+                &translated(&icosphere(1.0, 1), [3.0, 0.0, 0.0]),
+            ),
+            2,
+        ),
     ] {
         let l = dense(&cotan_laplacian(&mesh, &LaplacianParams::default()));
         let eig = l.symmetric_eigenvalues();
@@ -116,7 +133,11 @@ fn linear_functions_are_harmonic_in_the_interior() {
     }
     let mesh = TriMesh::new(v, f).unwrap();
     let l = dense(&cotan_laplacian(&mesh, &LaplacianParams::default()));
-    let lin: Vec<f64> = mesh.vertices().iter().map(|p| 2.0 * p[0] - 3.0 * p[1] + 0.5).collect();
+    let lin: Vec<f64> = mesh
+        .vertices()
+        .iter()
+        .map(|p| 2.0 * p[0] - 3.0 * p[1] + 0.5)
+        .collect();
     let y = &l * nalgebra::DVector::from_vec(lin);
     for k in 0..mesh.n_vertices() {
         let (i, j) = (k % (nx + 1), k / (nx + 1));
@@ -132,14 +153,24 @@ fn linear_functions_are_harmonic_in_the_interior() {
 #[test]
 fn voronoi_mass_closed_forms() {
     let s = 3f64.sqrt();
-    let eq = TriMesh::new(vec![[0.0, 0.0, 0.0], [2.0, 0.0, 0.0], [1.0, s, 0.0]], vec![[0, 1, 2]]).unwrap();
+    let eq = TriMesh::new(
+        vec![[0.0, 0.0, 0.0], [2.0, 0.0, 0.0], [1.0, s, 0.0]],
+        vec![[0, 1, 2]],
+    )
+    .unwrap();
     let m = fmaps_laplacian::mass_diagonal(&eq, MassKind::Voronoi);
     for x in &m {
         assert!((x - s / 3.0).abs() < 1e-14);
     }
-    let obt = TriMesh::new(vec![[0.0, 0.0, 0.0], [4.0, 0.0, 0.0], [2.0, 0.5, 0.0]], vec![[0, 1, 2]]).unwrap();
+    let obt = TriMesh::new(
+        vec![[0.0, 0.0, 0.0], [4.0, 0.0, 0.0], [2.0, 0.5, 0.0]],
+        vec![[0, 1, 2]],
+    )
+    .unwrap();
     let m = fmaps_laplacian::mass_diagonal(&obt, MassKind::Voronoi);
-    assert!((m[2] - 0.5).abs() < 1e-14 && (m[0] - 0.25).abs() < 1e-14 && (m[1] - 0.25).abs() < 1e-14);
+    assert!(
+        (m[2] - 0.5).abs() < 1e-14 && (m[0] - 0.25).abs() < 1e-14 && (m[1] - 0.25).abs() < 1e-14
+    );
 }
 
 #[test]

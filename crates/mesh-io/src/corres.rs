@@ -24,11 +24,19 @@ pub fn parse_index_list(data: &[u8], format: &'static str) -> Result<Vec<usize>>
         if toks.next().is_some() {
             return Err(parse_err(format, loc, "expected one vertex index per line"));
         }
-        let i: i64 = tok
-            .parse()
-            .map_err(|_| parse_err(format, loc, format!("'{tok}' is not an integer vertex index")))?;
+        let i: i64 = tok.parse().map_err(|_| {
+            parse_err(
+                format,
+                loc,
+                format!("'{tok}' is not an integer vertex index"),
+            )
+        })?;
         if i < 1 {
-            return Err(parse_err(format, loc, format!("vertex index {i} is not a 1-based index (must be >= 1)")));
+            return Err(parse_err(
+                format,
+                loc,
+                format!("vertex index {i} is not a 1-based index (must be >= 1)"),
+            ));
         }
         out.push((i - 1) as usize);
     }

@@ -167,7 +167,11 @@ impl Error {
 }
 
 /// Builds a parse error without a path (the caller adds it).
-pub(crate) fn parse_err(format: &'static str, location: Location, message: impl Into<String>) -> Error {
+pub(crate) fn parse_err(
+    format: &'static str,
+    location: Location,
+    message: impl Into<String>,
+) -> Error {
     Error::Parse {
         path: None,
         format,

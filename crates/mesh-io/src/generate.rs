@@ -88,7 +88,10 @@ pub fn icosphere(radius: f64, subdivisions: u32) -> TriMesh {
 /// `big_r`, sampled `nu` times around the axis and `nv` times around the
 /// tube (`nu * nv` vertices, genus 1). Needs `nu, nv >= 3`.
 pub fn torus(big_r: f64, r: f64, nu: usize, nv: usize) -> TriMesh {
-    assert!(nu >= 3 && nv >= 3, "torus needs at least 3 samples per direction");
+    assert!(
+        nu >= 3 && nv >= 3,
+        "torus needs at least 3 samples per direction"
+    );
     let mut v = Vec::with_capacity(nu * nv);
     for i in 0..nu {
         let u = 2.0 * std::f64::consts::PI * i as f64 / nu as f64;
@@ -115,11 +118,18 @@ pub fn torus(big_r: f64, r: f64, nu: usize, nv: usize) -> TriMesh {
 /// `(nx+1)(ny+1)` vertices, vertex `(i, j)` at index `j*(nx+1) + i` and
 /// position `(i*width/nx, j*height/ny, 0)`. Needs `nx, ny >= 1`.
 pub fn grid(width: f64, height: f64, nx: usize, ny: usize) -> TriMesh {
-    assert!(nx >= 1 && ny >= 1, "grid needs at least one cell per direction");
+    assert!(
+        nx >= 1 && ny >= 1,
+        "grid needs at least one cell per direction"
+    );
     let mut v = Vec::with_capacity((nx + 1) * (ny + 1));
     for j in 0..=ny {
         for i in 0..=nx {
-            v.push([width * i as f64 / nx as f64, height * j as f64 / ny as f64, 0.0]);
+            v.push([
+                width * i as f64 / nx as f64,
+                height * j as f64 / ny as f64,
+                0.0,
+            ]);
         }
     }
     let id = |i: usize, j: usize| j * (nx + 1) + i;
@@ -167,7 +177,11 @@ pub fn subdivide(mesh: &TriMesh) -> TriMesh {
             let (a, b) = (t[k], t[(k + 1) % 3]);
             m[k] = *mid.entry((a.min(b), a.max(b))).or_insert_with(|| {
                 let (pa, pb) = (v[a], v[b]);
-                v.push([(pa[0] + pb[0]) / 2.0, (pa[1] + pb[1]) / 2.0, (pa[2] + pb[2]) / 2.0]);
+                v.push([
+                    (pa[0] + pb[0]) / 2.0,
+                    (pa[1] + pb[1]) / 2.0,
+                    (pa[2] + pb[2]) / 2.0,
+                ]);
                 v.len() - 1
             });
         }

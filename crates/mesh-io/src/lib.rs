@@ -275,9 +275,18 @@ pub(crate) mod text {
     }
 
     /// Parses a finite coordinate.
-    pub(crate) fn coord(tok: &str, format: &'static str, line: usize, vertex: usize) -> Result<f64, Error> {
+    pub(crate) fn coord(
+        tok: &str,
+        format: &'static str,
+        line: usize,
+        vertex: usize,
+    ) -> Result<f64, Error> {
         let v: f64 = tok.parse().map_err(|_| {
-            parse_err(format, Location::Line(line), format!("vertex {vertex}: '{tok}' is not a number"))
+            parse_err(
+                format,
+                Location::Line(line),
+                format!("vertex {vertex}: '{tok}' is not a number"),
+            )
         })?;
         if !v.is_finite() {
             return Err(parse_err(

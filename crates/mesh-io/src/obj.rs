@@ -2,9 +2,9 @@
 
 use std::io::{self, Write};
 
+use crate::TriMesh;
 use crate::error::{Error, Location, MeshProblem, Result, parse_err};
 use crate::text::{content_lines, coord, fan};
-use crate::TriMesh;
 
 const FMT: &str = "OBJ";
 
@@ -29,7 +29,11 @@ pub fn parse_obj(data: &[u8]) -> Result<TriMesh> {
                 let mut p = [0.0; 3];
                 for c in &mut p {
                     let tok = toks.next().ok_or_else(|| {
-                        parse_err(FMT, Location::Line(line), format!("vertex {v} has fewer than 3 coordinates"))
+                        parse_err(
+                            FMT,
+                            Location::Line(line),
+                            format!("vertex {v} has fewer than 3 coordinates"),
+                        )
                     })?;
                     *c = coord(tok, FMT, line, v)?;
                 }
@@ -41,7 +45,11 @@ pub fn parse_obj(data: &[u8]) -> Result<TriMesh> {
                 for tok in toks {
                     let idx = tok.split('/').next().unwrap_or("");
                     let i: i64 = idx.parse().map_err(|_| {
-                        parse_err(FMT, Location::Line(line), format!("'{tok}' is not a vertex reference"))
+                        parse_err(
+                            FMT,
+                            Location::Line(line),
+                            format!("'{tok}' is not a vertex reference"),
+                        )
                     })?;
                     let nv = vertices.len() as i64;
                     let resolved = if i > 0 { i - 1 } else { nv + i };
@@ -49,7 +57,9 @@ pub fn parse_obj(data: &[u8]) -> Result<TriMesh> {
                         return Err(parse_err(
                             FMT,
                             Location::Line(line),
-                            format!("face refers to vertex {i}, but only {nv} vertices are defined before this line (OBJ indices are 1-based)"),
+                            format!(
+                                "face refers to vertex {i}, but only {nv} vertices are defined before this line (OBJ indices are 1-based)"
+                            ),
                         ));
                     }
                     poly.push(resolved as usize);
@@ -58,7 +68,10 @@ pub fn parse_obj(data: &[u8]) -> Result<TriMesh> {
                     return Err(parse_err(
                         FMT,
                         Location::Line(line),
-                        format!("face {f} has {} vertices; a face needs at least 3", poly.len()),
+                        format!(
+                            "face {f} has {} vertices; a face needs at least 3",
+                            poly.len()
+                        ),
                     ));
                 }
                 fan(&poly, &mut faces);
@@ -69,7 +82,10 @@ pub fn parse_obj(data: &[u8]) -> Result<TriMesh> {
     if vertices.is_empty() || faces.is_empty() {
         return Err(Error::InvalidMesh {
             path: None,
-            problem: MeshProblem::Empty { n_vertices: vertices.len(), n_faces: faces.len() },
+            problem: MeshProblem::Empty {
+                n_vertices: vertices.len(),
+                n_faces: faces.len(),
+            },
         });
     }
     TriMesh::new(vertices, faces)

@@ -2,9 +2,9 @@
 
 use std::io::{self, Write};
 
+use crate::TriMesh;
 use crate::error::{Error, Location, MeshProblem, Result, parse_err};
 use crate::text::{content_lines, coord, fan};
-use crate::TriMesh;
 
 const FMT: &str = "OFF";
 
@@ -166,7 +166,9 @@ pub(crate) fn vertex_index(tok: &str, nv: usize, line: usize, face: usize) -> Re
         Ok(i) if (i as u64) >= nv as u64 => Err(parse_err(
             FMT,
             Location::Line(line),
-            format!("face {face} refers to vertex {i}, but the file has {nv} vertices (indices are 0-based)"),
+            format!(
+                "face {face} refers to vertex {i}, but the file has {nv} vertices (indices are 0-based)"
+            ),
         )),
         Ok(i) => Ok(i as usize),
         Err(_) => Err(parse_err(

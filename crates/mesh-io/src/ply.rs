@@ -2,9 +2,9 @@
 
 use std::io::{self, Write};
 
+use crate::TriMesh;
 use crate::error::{Error, Location, MeshProblem, Result, parse_err};
 use crate::text::fan;
-use crate::TriMesh;
 
 const FMT: &str = "PLY";
 
@@ -58,8 +58,15 @@ impl Scalar {
 
 #[derive(Debug, Clone)]
 enum Property {
-    Scalar { name: String, ty: Scalar },
-    List { name: String, count: Scalar, item: Scalar },
+    Scalar {
+        name: String,
+        ty: Scalar,
+    },
+    List {
+        name: String,
+        count: Scalar,
+        item: Scalar,
+    },
 }
 
 #[derive(Debug, Clone)]
@@ -86,11 +93,23 @@ pub fn parse_ply(data: &[u8]) -> Result<TriMesh> {
     let vidx = elements
         .iter()
         .position(|e| e.name == "vertex")
-        .ok_or_else(|| parse_err(FMT, Location::Line(1), "the header declares no 'vertex' element"))?;
+        .ok_or_else(|| {
+            parse_err(
+                FMT,
+                Location::Line(1),
+                "the header declares no 'vertex' element",
+            )
+        })?;
     let fidx = elements
         .iter()
         .position(|e| e.name == "face")
-        .ok_or_else(|| parse_err(FMT, Location::Line(1), "the header declares no 'face' element"))?;
+        .ok_or_else(|| {
+            parse_err(
+                FMT,
+                Location::Line(1),
+                "the header declares no 'face' element",
+            )
+        })?;
     let vel = &elements[vidx];
     let coord_slots: Vec<usize> = ["x", "y", "z"]
         .iter()
@@ -144,8 +163,16 @@ pub fn parse_ply(data: &[u8]) -> Result<TriMesh> {
 
     let mut reader: Box<dyn ValueReader> = match encoding {
         Encoding::Ascii => Box::new(AsciiReader::new(&data[body_start..], body_line)),
-        Encoding::BinaryLe => Box::new(BinReader { data, pos: body_start, le: true }),
-        Encoding::BinaryBe => Box::new(BinReader { data, pos: body_start, le: false }),
+        Encoding::BinaryLe => Box::new(BinReader {
+            data,
+            pos: body_start,
+            le: true,
+        }),
+        Encoding::BinaryBe => Box::new(BinReader {
+            data,
+            pos: body_start,
+            le: false,
+        }),
     };
     let body = &data[body_start..];
     let mut vertices = Vec::with_capacity(nv.min(body.len() / 3 + 1));
@@ -202,7 +229,9 @@ pub fn parse_ply(data: &[u8]) -> Result<TriMesh> {
                                 return Err(parse_err(
                                     FMT,
                                     loc,
-                                    format!("face {inst} has {c} vertices; a face needs at least 3"),
+                                    format!(
+                                        "face {inst} has {c} vertices; a face needs at least 3"
+                                    ),
                                 ));
                             }
                             poly.clear();
@@ -210,13 +239,19 @@ pub fn parse_ply(data: &[u8]) -> Result<TriMesh> {
                                 let loc = reader.location();
                                 let v = reader.read(*item)?;
                                 if v < 0.0 {
-                                    return Err(parse_err(FMT, loc, format!("face {inst} has a negative vertex index {v}")));
+                                    return Err(parse_err(
+                                        FMT,
+                                        loc,
+                                        format!("face {inst} has a negative vertex index {v}"),
+                                    ));
                                 }
                                 if v >= nv as f64 {
                                     return Err(parse_err(
                                         FMT,
                                         loc,
-                                        format!("face {inst} refers to vertex {v}, but the file has {nv} vertices"),
+                                        format!(
+                                            "face {inst} refers to vertex {v}, but the file has {nv} vertices"
+                                        ),
                                     ));
                                 }
                                 poly.push(v as usize);
@@ -255,9 +290,16 @@ fn parse_header(data: &[u8]) -> Result<(Encoding, Vec<Element>, usize, usize)> {
     let mut elements: Vec<Element> = Vec::new();
     loop {
         if pos >= data.len() {
-            return Err(parse_err(FMT, Location::End, "file ends inside the header (no 'end_header')"));
+            return Err(parse_err(
+                FMT,
+                Location::End,
+                "file ends inside the header (no 'end_header')",
+            ));
         }
-        let end = data[pos..].iter().position(|&b| b == b'\n').map_or(data.len(), |e| pos + e);
+        let end = data[pos..]
+            .iter()
+            .position(|&b| b == b'\n')
+            .map_or(data.len(), |e| pos + e);
         let raw = &data[pos..end];
         pos = (end + 1).min(data.len());
         line_no += 1;
@@ -269,7 +311,11 @@ fn parse_header(data: &[u8]) -> Result<(Encoding, Vec<Element>, usize, usize)> {
         let key = toks.next().unwrap_or("");
         if line_no == 1 {
             if key != "ply" {
-                return Err(parse_err(FMT, loc, format!("expected 'ply' on the first line, found '{text}'")));
+                return Err(parse_err(
+                    FMT,
+                    loc,
+                    format!("expected 'ply' on the first line, found '{text}'"),
+                ));
             }
             continue;
         }
@@ -285,16 +331,33 @@ fn parse_header(data: &[u8]) -> Result<(Encoding, Vec<Element>, usize, usize)> {
                 });
                 let ver = toks.next().unwrap_or("");
                 if ver != "1.0" {
-                    return Err(parse_err(FMT, loc, format!("unsupported PLY version '{ver}' (expected 1.0)")));
+                    return Err(parse_err(
+                        FMT,
+                        loc,
+                        format!("unsupported PLY version '{ver}' (expected 1.0)"),
+                    ));
                 }
             }
             "element" => {
-                let name = toks.next().ok_or_else(|| parse_err(FMT, loc, "element without a name"))?;
+                let name = toks
+                    .next()
+                    .ok_or_else(|| parse_err(FMT, loc, "element without a name"))?;
                 let count_tok = toks.next().unwrap_or("");
                 let count = count_tok.parse::<usize>().map_err(|_| {
-                    parse_err(FMT, loc, format!("element '{name}': count '{count_tok}' is not a non-negative integer"))
+                    parse_err(
+                        FMT,
+                        loc,
+                        format!(
+                            "element '{name}': count '{count_tok}' is not a non-negative integer"
+                        ),
+                    )
                 })?;
-                elements.push(Element { name: name.to_string(), count, props: Vec::new(), line: line_no });
+                elements.push(Element {
+                    name: name.to_string(),
+                    count,
+                    props: Vec::new(),
+                    line: line_no,
+                });
             }
             "property" => {
                 let el = elements
@@ -304,24 +367,50 @@ fn parse_header(data: &[u8]) -> Result<(Encoding, Vec<Element>, usize, usize)> {
                 let prop = if t == "list" {
                     let ct = toks.next().unwrap_or("");
                     let it = toks.next().unwrap_or("");
-                    let name = toks.next().ok_or_else(|| parse_err(FMT, loc, "list property without a name"))?;
+                    let name = toks
+                        .next()
+                        .ok_or_else(|| parse_err(FMT, loc, "list property without a name"))?;
                     let count = Scalar::parse(ct)
                         .filter(|s| s.is_integer())
-                        .ok_or_else(|| parse_err(FMT, loc, format!("list count type '{ct}' is not an integer type")))?;
-                    let item = Scalar::parse(it).ok_or_else(|| parse_err(FMT, loc, format!("unknown type '{it}'")))?;
-                    Property::List { name: name.to_string(), count, item }
+                        .ok_or_else(|| {
+                            parse_err(
+                                FMT,
+                                loc,
+                                format!("list count type '{ct}' is not an integer type"),
+                            )
+                        })?;
+                    let item = Scalar::parse(it)
+                        .ok_or_else(|| parse_err(FMT, loc, format!("unknown type '{it}'")))?;
+                    Property::List {
+                        name: name.to_string(),
+                        count,
+                        item,
+                    }
                 } else {
-                    let ty = Scalar::parse(t).ok_or_else(|| parse_err(FMT, loc, format!("unknown type '{t}'")))?;
-                    let name = toks.next().ok_or_else(|| parse_err(FMT, loc, "property without a name"))?;
-                    Property::Scalar { name: name.to_string(), ty }
+                    let ty = Scalar::parse(t)
+                        .ok_or_else(|| parse_err(FMT, loc, format!("unknown type '{t}'")))?;
+                    let name = toks
+                        .next()
+                        .ok_or_else(|| parse_err(FMT, loc, "property without a name"))?;
+                    Property::Scalar {
+                        name: name.to_string(),
+                        ty,
+                    }
                 };
                 el.props.push(prop);
             }
             "end_header" => break,
-            other => return Err(parse_err(FMT, loc, format!("unknown header keyword '{other}'"))),
+            other => {
+                return Err(parse_err(
+                    FMT,
+                    loc,
+                    format!("unknown header keyword '{other}'"),
+                ));
+            }
         }
     }
-    let encoding = encoding.ok_or_else(|| parse_err(FMT, Location::Line(2), "the header has no 'format' line"))?;
+    let encoding = encoding
+        .ok_or_else(|| parse_err(FMT, Location::Line(2), "the header has no 'format' line"))?;
     Ok((encoding, elements, pos, line_no + 1))
 }
 
@@ -389,9 +478,12 @@ impl ValueReader for BinReader<'_> {
     }
 }
 
+/// The lines of a byte slice, numbered from 0.
+type NumberedLines<'a> = std::iter::Enumerate<std::slice::Split<'a, u8, fn(&u8) -> bool>>;
+
 /// ASCII body: one element instance per (non-empty) line.
 struct AsciiReader<'a> {
-    lines: std::iter::Enumerate<std::slice::Split<'a, u8, fn(&u8) -> bool>>,
+    lines: NumberedLines<'a>,
     first_line: usize,
     line: usize,
     toks: std::vec::IntoIter<&'a str>,
@@ -415,7 +507,11 @@ impl ValueReader for AsciiReader<'_> {
     fn start_instance(&mut self) -> Result<()> {
         loop {
             let Some((i, raw)) = self.lines.next() else {
-                return Err(parse_err(FMT, Location::End, "file ends before all declared elements were read (truncated file)"));
+                return Err(parse_err(
+                    FMT,
+                    Location::End,
+                    "file ends before all declared elements were read (truncated file)",
+                ));
             };
             self.line = self.first_line + i;
             let text = std::str::from_utf8(raw)
@@ -445,10 +541,13 @@ impl ValueReader for AsciiReader<'_> {
 
     fn read(&mut self, ty: Scalar) -> Result<f64> {
         let loc = Location::Line(self.line);
-        let tok = self
-            .toks
-            .next()
-            .ok_or_else(|| parse_err(FMT, loc, "fewer values on the line than the header declares"))?;
+        let tok = self.toks.next().ok_or_else(|| {
+            parse_err(
+                FMT,
+                loc,
+                "fewer values on the line than the header declares",
+            )
+        })?;
         if ty.is_integer() {
             tok.parse::<i64>()
                 .map(|v| v as f64)
@@ -480,7 +579,12 @@ pub fn write_ply<W: Write>(w: &mut W, mesh: &TriMesh) -> io::Result<()> {
     for f in mesh.faces() {
         buf.push(3);
         for &i in f {
-            let i = i32::try_from(i).map_err(|_| io::Error::new(io::ErrorKind::InvalidInput, "vertex index does not fit a PLY int"))?;
+            let i = i32::try_from(i).map_err(|_| {
+                io::Error::new(
+                    io::ErrorKind::InvalidInput,
+                    "vertex index does not fit a PLY int",
+                )
+            })?;
             buf.extend_from_slice(&i.to_le_bytes());
         }
     }

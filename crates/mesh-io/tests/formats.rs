@@ -4,7 +4,12 @@ use fmaps_mesh_io::*;
 
 fn tet() -> TriMesh {
     TriMesh::new(
-        vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
+        vec![
+            [0.0, 0.0, 0.0],
+            [1.0, 0.0, 0.0],
+            [0.0, 1.0, 0.0],
+            [0.0, 0.0, 1.0],
+        ],
         vec![[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]],
     )
     .unwrap()
@@ -14,9 +19,14 @@ fn tet() -> TriMesh {
 #[track_caller]
 fn parse_error_at(r: Result<TriMesh>, want: Location, needle: &str) {
     match r {
-        Err(Error::Parse { location, message, .. }) => {
+        Err(Error::Parse {
+            location, message, ..
+        }) => {
             assert_eq!(location, want, "message: {message}");
-            assert!(message.contains(needle), "'{message}' does not contain '{needle}'");
+            assert!(
+                message.contains(needle),
+                "'{message}' does not contain '{needle}'"
+            );
         }
         other => panic!("expected a parse error at {want}, got {other:?}"),
     }
@@ -48,21 +58,64 @@ fn off_errors_name_the_line() {
     parse_error_at(p("4OFF\n"), Location::Line(1), "unsupported OFF variant");
     parse_error_at(p("OFF\nx 1 0\n"), Location::Line(2), "vertex count 'x'");
     parse_error_at(p("OFF\n-3 1 0\n"), Location::Line(2), "vertex count '-3'");
-    parse_error_at(p("OFF\n3 1 0\n0 0 0\n1 0\n"), Location::Line(4), "fewer than 3 coordinates");
-    parse_error_at(p("OFF\n3 1 0\n0 0 0\n1 0 nan\n0 1 0\n3 0 1 2\n"), Location::Line(4), "non-finite");
-    parse_error_at(p("OFF\n3 1 0\n0 0 0\n1 0 inf\n"), Location::Line(4), "non-finite");
-    parse_error_at(p("OFF\n3 1 0\n0 0 0\n1 0 a\n"), Location::Line(4), "not a number");
-    parse_error_at(p("OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 3\n"), Location::Line(6), "refers to vertex 3");
-    parse_error_at(p("OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 -1 2\n"), Location::Line(6), "negative vertex index -1");
-    parse_error_at(p("OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n2 0 1\n"), Location::Line(6), "needs at least 3");
-    parse_error_at(p("OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n4 0 1 2\n"), Location::Line(6), "declares 4 vertices but lists 3");
-    parse_error_at(p("OFF\n3 2 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n"), Location::End, "face 1 of 2");
+    parse_error_at(
+        p("OFF\n3 1 0\n0 0 0\n1 0\n"),
+        Location::Line(4),
+        "fewer than 3 coordinates",
+    );
+    parse_error_at(
+        p("OFF\n3 1 0\n0 0 0\n1 0 nan\n0 1 0\n3 0 1 2\n"),
+        Location::Line(4),
+        "non-finite",
+    );
+    parse_error_at(
+        p("OFF\n3 1 0\n0 0 0\n1 0 inf\n"),
+        Location::Line(4),
+        "non-finite",
+    );
+    parse_error_at(
+        p("OFF\n3 1 0\n0 0 0\n1 0 a\n"),
+        Location::Line(4),
+        "not a number",
+    );
+    parse_error_at(
+        p("OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 3\n"),
+        Location::Line(6),
+        "refers to vertex 3",
+    );
+    parse_error_at(
+        p("OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 -1 2\n"),
+        Location::Line(6),
+        "negative vertex index -1",
+    );
+    parse_error_at(
+        p("OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n2 0 1\n"),
+        Location::Line(6),
+        "needs at least 3",
+    );
+    parse_error_at(
+        p("OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n4 0 1 2\n"),
+        Location::Line(6),
+        "declares 4 vertices but lists 3",
+    );
+    parse_error_at(
+        p("OFF\n3 2 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n"),
+        Location::End,
+        "face 1 of 2",
+    );
     parse_error_at(p("OFF\n3 1 0\n0 0 0\n"), Location::End, "vertex 1 of 3");
     parse_error_at(p(""), Location::End, "OFF header");
-    parse_error_at(parse_off(b"OFF\n3 1 0\n0 0 \xff\n"), Location::Line(3), "UTF-8");
+    parse_error_at(
+        parse_off(b"OFF\n3 1 0\n0 0 \xff\n"),
+        Location::Line(3),
+        "UTF-8",
+    );
     assert!(matches!(
         p("OFF\n0 0 0\n"),
-        Err(Error::InvalidMesh { problem: MeshProblem::Empty { .. }, .. })
+        Err(Error::InvalidMesh {
+            problem: MeshProblem::Empty { .. },
+            ..
+        })
     ));
 }
 
@@ -85,7 +138,11 @@ fn binary_ply(le: bool, coord_double: bool, list: (&str, &str)) -> Vec<u8> {
     } else {
         "property float x\nproperty float y\nproperty float z\nproperty uchar red\n"
     };
-    let fmt = if le { "binary_little_endian" } else { "binary_big_endian" };
+    let fmt = if le {
+        "binary_little_endian"
+    } else {
+        "binary_big_endian"
+    };
     let mut out = ply_header(fmt, vprops, &format!("{} {}", list.0, list.1), 4, 4).into_bytes();
     let put = |out: &mut Vec<u8>, b: &[u8]| {
         let mut b = b.to_vec();
@@ -126,7 +183,11 @@ fn ply_binary_both_endians_float_and_double() {
         for dbl in [true, false] {
             for list in [("uchar", "int"), ("int", "uint"), ("uchar", "ushort")] {
                 let data = binary_ply(le, dbl, list);
-                assert_eq!(parse_ply(&data).unwrap(), tet(), "le={le} double={dbl} list={list:?}");
+                assert_eq!(
+                    parse_ply(&data).unwrap(),
+                    tet(),
+                    "le={le} double={dbl} list={list:?}"
+                );
             }
         }
     }
@@ -139,21 +200,94 @@ fn ply_errors_name_line_or_byte() {
     let hdr_lines = hdr.lines().count();
     let p = |s: String| parse_ply(s.as_bytes());
     parse_error_at(p("plx\n".into()), Location::Line(1), "expected 'ply'");
-    parse_error_at(p("ply\nformat ascii 2.0\n".into()), Location::Line(2), "unsupported PLY version");
-    parse_error_at(p("ply\nformat utf8 1.0\n".into()), Location::Line(2), "unknown PLY format");
-    parse_error_at(p("ply\nformat ascii 1.0\nelement vertex 1\nproperty quad x\n".into()), Location::Line(4), "unknown type");
-    parse_error_at(p("ply\nformat ascii 1.0\nelement vertex 1\n".into()), Location::End, "no 'end_header'");
+    parse_error_at(
+        p("ply\nformat ascii 2.0\n".into()),
+        Location::Line(2),
+        "unsupported PLY version",
+    );
+    parse_error_at(
+        p("ply\nformat utf8 1.0\n".into()),
+        Location::Line(2),
+        "unknown PLY format",
+    );
+    parse_error_at(
+        p("ply\nformat ascii 1.0\nelement vertex 1\nproperty quad x\n".into()),
+        Location::Line(4),
+        "unknown type",
+    );
+    parse_error_at(
+        p("ply\nformat ascii 1.0\nelement vertex 1\n".into()),
+        Location::End,
+        "no 'end_header'",
+    );
     parse_error_at(p("ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n".into()), Location::Line(3), "no scalar property 'y'");
     parse_error_at(p("ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\nproperty float z\nend_header\n".into()), Location::Line(1), "no 'face' element");
+    parse_error_at(
+        p("ply\nformat ascii 1.0\nproperty float x\n".into()),
+        Location::Line(3),
+        "property before any element",
+    );
+    parse_error_at(
+        p(
+            "ply\nformat ascii 1.0\nelement face 1\nproperty list float int vertex_indices\n"
+                .into(),
+        ),
+        Location::Line(4),
+        "not an integer type",
+    );
+    parse_error_at(
+        p("ply\nformat ascii 1.0\nelement vertex x\n".into()),
+        Location::Line(3),
+        "count 'x'",
+    );
+    parse_error_at(
+        p("ply\nformat ascii 1.0\nbogus line\n".into()),
+        Location::Line(3),
+        "unknown header keyword",
+    );
+    parse_error_at(p("ply\nelement vertex 1\nproperty float x\nproperty float y\nproperty float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n".into()), Location::Line(2), "no 'format' line");
+    parse_error_at(p("ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\nelement face 1\nproperty list uchar float vertex_indices\nend_header\n".into()), Location::Line(7), "integer type");
     let l = |k: usize| Location::Line(hdr_lines + k);
-    parse_error_at(p(format!("{hdr}0 0 0\n1 0 0\n0 1 0\n3 0 1 3\n")), l(4), "refers to vertex 3");
-    parse_error_at(p(format!("{hdr}0 0 0\n1 0 0\n0 1 0\n3 0 -1 2\n")), l(4), "negative vertex index");
-    parse_error_at(p(format!("{hdr}0 0 0\n1 0 0\n0 1 0\n2 0 1\n")), l(4), "needs at least 3");
-    parse_error_at(p(format!("{hdr}0 0 0\n1 nan 0\n0 1 0\n3 0 1 2\n")), l(2), "non-finite");
-    parse_error_at(p(format!("{hdr}0 0 0\n1 0\n0 1 0\n3 0 1 2\n")), l(2), "fewer values");
-    parse_error_at(p(format!("{hdr}0 0 0 5\n1 0 0\n0 1 0\n3 0 1 2\n")), l(1), "more values");
-    parse_error_at(p(format!("{hdr}0 0 0\n1 0 0\n0 1 0\n3 0 1.5 2\n")), l(4), "not an integer");
-    parse_error_at(p(format!("{hdr}0 0 0\n1 0 0\n")), Location::End, "truncated");
+    parse_error_at(
+        p(format!("{hdr}0 0 0\n1 0 0\n0 1 0\n3 0 1 3\n")),
+        l(4),
+        "refers to vertex 3",
+    );
+    parse_error_at(
+        p(format!("{hdr}0 0 0\n1 0 0\n0 1 0\n3 0 -1 2\n")),
+        l(4),
+        "negative vertex index",
+    );
+    parse_error_at(
+        p(format!("{hdr}0 0 0\n1 0 0\n0 1 0\n2 0 1\n")),
+        l(4),
+        "needs at least 3",
+    );
+    parse_error_at(
+        p(format!("{hdr}0 0 0\n1 nan 0\n0 1 0\n3 0 1 2\n")),
+        l(2),
+        "non-finite",
+    );
+    parse_error_at(
+        p(format!("{hdr}0 0 0\n1 0\n0 1 0\n3 0 1 2\n")),
+        l(2),
+        "fewer values",
+    );
+    parse_error_at(
+        p(format!("{hdr}0 0 0 5\n1 0 0\n0 1 0\n3 0 1 2\n")),
+        l(1),
+        "more values",
+    );
+    parse_error_at(
+        p(format!("{hdr}0 0 0\n1 0 0\n0 1 0\n3 0 1.5 2\n")),
+        l(4),
+        "not an integer",
+    );
+    parse_error_at(
+        p(format!("{hdr}0 0 0\n1 0 0\n")),
+        Location::End,
+        "truncated",
+    );
 
     let data = binary_ply(true, true, ("uchar", "int"));
     let body = data.len() - (4 * 25 + 4 * 13);
@@ -163,7 +297,11 @@ fn ply_errors_name_line_or_byte() {
     let mut bad = data.clone();
     let idx_at = body + 4 * 25 + 1;
     bad[idx_at..idx_at + 4].copy_from_slice(&7i32.to_le_bytes());
-    parse_error_at(parse_ply(&bad), Location::Byte(idx_at), "refers to vertex 7");
+    parse_error_at(
+        parse_ply(&bad),
+        Location::Byte(idx_at),
+        "refers to vertex 7",
+    );
     let mut nan = data.clone();
     nan[body + 8..body + 16].copy_from_slice(&f64::NAN.to_le_bytes());
     parse_error_at(parse_ply(&nan), Location::Byte(body), "non-finite");
@@ -178,13 +316,37 @@ fn obj_geometry_with_texture_normal_and_negative_indices() {
 #[test]
 fn obj_errors_name_the_line() {
     let p = |s: &str| parse_obj(s.as_bytes());
-    parse_error_at(p("v 0 0 0\nv 1 0 0\nv 0 1\n"), Location::Line(3), "fewer than 3 coordinates");
+    parse_error_at(
+        p("v 0 0 0\nv 1 0 0\nv 0 1\n"),
+        Location::Line(3),
+        "fewer than 3 coordinates",
+    );
     parse_error_at(p("v 0 0 0\nv 1 0 inf\n"), Location::Line(2), "non-finite");
-    parse_error_at(p("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 4\n"), Location::Line(4), "refers to vertex 4");
-    parse_error_at(p("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 0 1 2\n"), Location::Line(4), "refers to vertex 0");
-    parse_error_at(p("v 0 0 0\nv 1 0 0\nv 0 1 0\nf -4 1 2\n"), Location::Line(4), "refers to vertex -4");
-    parse_error_at(p("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2\n"), Location::Line(4), "needs at least 3");
-    parse_error_at(p("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 x 2\n"), Location::Line(4), "not a vertex reference");
+    parse_error_at(
+        p("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 4\n"),
+        Location::Line(4),
+        "refers to vertex 4",
+    );
+    parse_error_at(
+        p("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 0 1 2\n"),
+        Location::Line(4),
+        "refers to vertex 0",
+    );
+    parse_error_at(
+        p("v 0 0 0\nv 1 0 0\nv 0 1 0\nf -4 1 2\n"),
+        Location::Line(4),
+        "refers to vertex -4",
+    );
+    parse_error_at(
+        p("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2\n"),
+        Location::Line(4),
+        "needs at least 3",
+    );
+    parse_error_at(
+        p("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 x 2\n"),
+        Location::Line(4),
+        "not a vertex reference",
+    );
     assert!(matches!(p("v 0 0 0\n"), Err(Error::InvalidMesh { .. })));
 }
 
@@ -196,14 +358,25 @@ fn obj_agrees_with_tobj_on_geometry() {
     let mut bytes = Vec::new();
     write_obj(&mut bytes, &m).unwrap();
     let ours = parse_obj(&bytes).unwrap();
-    let opts = tobj::LoadOptions { triangulate: true, single_index: true, ..Default::default() };
-    let (models, _) = tobj::load_obj_buf(&mut bytes.as_slice(), &opts, |_| Err(tobj::LoadError::OpenFileFailed)).unwrap();
+    let opts = tobj::LoadOptions {
+        triangulate: true,
+        single_index: true,
+        ..Default::default()
+    };
+    let (models, _) = tobj::load_obj_buf(&mut bytes.as_slice(), &opts, |_| {
+        Err(tobj::LoadError::OpenFileFailed)
+    })
+    .unwrap();
     let tm = &models[0].mesh;
     assert_eq!(tm.indices.len(), 3 * ours.n_faces());
     for (fi, f) in ours.faces().iter().enumerate() {
         for k in 0..3 {
             let ti = tm.indices[3 * fi + k] as usize;
-            let tp = [tm.positions[3 * ti], tm.positions[3 * ti + 1], tm.positions[3 * ti + 2]];
+            let tp = [
+                tm.positions[3 * ti],
+                tm.positions[3 * ti + 1],
+                tm.positions[3 * ti + 2],
+            ];
             let op = ours.vertices()[f[k]];
             for c in 0..3 {
                 assert!((tp[c] as f64 - op[c]).abs() <= 1e-6 * (1.0 + op[c].abs()));
@@ -214,9 +387,16 @@ fn obj_agrees_with_tobj_on_geometry() {
 
 #[test]
 fn index_lists_are_one_based_on_disk() {
-    assert_eq!(parse_index_list(b"1\n5\n\n3\n", ".vts").unwrap(), vec![0, 4, 2]);
+    assert_eq!(
+        parse_index_list(b"1\n5\n\n3\n", ".vts").unwrap(),
+        vec![0, 4, 2]
+    );
     let e = |s: &str, line: usize, needle: &str| {
-        parse_error_at(parse_index_list(s.as_bytes(), ".map").map(|_| tet()), Location::Line(line), needle)
+        parse_error_at(
+            parse_index_list(s.as_bytes(), ".map").map(|_| tet()),
+            Location::Line(line),
+            needle,
+        )
     };
     e("1\n0\n", 2, "not a 1-based index");
     e("1\n-2\n", 2, "not a 1-based index");
@@ -224,7 +404,12 @@ fn index_lists_are_one_based_on_disk() {
     e("1.5\n", 1, "not an integer");
     let idx = parse_index_list(b"1\n2\n9\n", ".map").unwrap();
     match check_indices(&idx, 5, None) {
-        Err(Error::IndexOutOfRange { line: 3, index: 9, n_vertices: 5, .. }) => {}
+        Err(Error::IndexOutOfRange {
+            line: 3,
+            index: 9,
+            n_vertices: 5,
+            ..
+        }) => {}
         other => panic!("{other:?}"),
     }
     let mut out = Vec::new();
@@ -239,7 +424,10 @@ fn file_errors_name_the_file() {
     let bad = dir.join("bad.off");
     std::fs::write(&bad, "OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 7\n").unwrap();
     let msg = read_mesh(&bad).unwrap_err().to_string();
-    assert!(msg.contains("bad.off") && msg.contains("line 6") && msg.contains("refers to vertex 7"), "{msg}");
+    assert!(
+        msg.contains("bad.off") && msg.contains("line 6") && msg.contains("refers to vertex 7"),
+        "{msg}"
+    );
     let missing = read_mesh(dir.join("missing.ply")).unwrap_err();
     assert!(matches!(missing, Error::Io { .. }) && missing.to_string().contains("missing.ply"));
     let unknown = read_mesh(dir.join("mesh.stl")).unwrap_err();
@@ -265,9 +453,31 @@ fn file_errors_name_the_file() {
 #[test]
 fn trimesh_new_rejects_invalid_arrays() {
     let e = TriMesh::new(vec![[0.0, f64::NAN, 0.0]], vec![[0, 0, 0]]).unwrap_err();
-    assert!(matches!(e, Error::InvalidMesh { problem: MeshProblem::NonFiniteVertex { vertex: 0, .. }, .. }));
+    assert!(matches!(
+        e,
+        Error::InvalidMesh {
+            problem: MeshProblem::NonFiniteVertex { vertex: 0, .. },
+            ..
+        }
+    ));
     let e = TriMesh::new(vec![[0.0; 3]; 3], vec![[0, 1, 3]]).unwrap_err();
-    assert!(matches!(e, Error::InvalidMesh { problem: MeshProblem::FaceIndexOutOfRange { face: 0, index: 3, n_vertices: 3 }, .. }));
+    assert!(matches!(
+        e,
+        Error::InvalidMesh {
+            problem: MeshProblem::FaceIndexOutOfRange {
+                face: 0,
+                index: 3,
+                n_vertices: 3
+            },
+            ..
+        }
+    ));
     let e = TriMesh::new(vec![], vec![]).unwrap_err();
-    assert!(matches!(e, Error::InvalidMesh { problem: MeshProblem::Empty { .. }, .. }));
+    assert!(matches!(
+        e,
+        Error::InvalidMesh {
+            problem: MeshProblem::Empty { .. },
+            ..
+        }
+    ));
 }

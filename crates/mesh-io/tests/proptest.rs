@@ -42,7 +42,12 @@ fn all_parsers(data: &[u8]) {
 fn mesh_strategy() -> impl Strategy<Value = TriMesh> {
     (1usize..20).prop_flat_map(|nv| {
         (
-            prop::collection::vec(prop::array::uniform3(prop::num::f64::NORMAL | prop::num::f64::ZERO | prop::num::f64::SUBNORMAL), nv),
+            prop::collection::vec(
+                prop::array::uniform3(
+                    prop::num::f64::NORMAL | prop::num::f64::ZERO | prop::num::f64::SUBNORMAL,
+                ),
+                nv,
+            ),
             prop::collection::vec(prop::array::uniform3(0..nv), 1..30),
         )
             .prop_map(|(v, f)| TriMesh::new(v, f).unwrap())

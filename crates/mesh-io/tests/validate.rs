@@ -1,7 +1,7 @@
 //! The validation report on meshes with known combinatorics.
 
-use fmaps_mesh_io::generate::{disjoint_union, grid, icosphere, torus, translated};
 use fmaps_mesh_io::TriMesh;
+use fmaps_mesh_io::generate::{disjoint_union, grid, icosphere, torus, translated};
 
 #[test]
 fn icosphere_is_a_clean_sphere() {
