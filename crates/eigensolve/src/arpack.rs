@@ -15,8 +15,8 @@ use nalgebra::{DMatrix, DVector};
 
 use crate::factor::{Factorization, ShiftInvert};
 use crate::native::default_shift;
-use crate::verify::{SplitMix, fix_signs, orthonormality_error, residuals};
-use crate::{EigenProblem, EigenSolver, Error, Result, SolveReport, SpectralBasis};
+use crate::verify::{RunStats, SplitMix, finish, fix_signs};
+use crate::{EigenProblem, EigenSolver, Error, Result, SpectralBasis};
 
 /// ARPACK keeps state in Fortran common blocks (timers, debug levels):
 /// calls from several threads at once are not safe, so they are serialized.
@@ -210,22 +210,14 @@ impl EigenSolver for ArpackSolver {
         let eigenvalues = DVector::from_iterator(k, order.iter().map(|&i| d[i]));
         let mut eigenvectors = DMatrix::from_fn(n, k, |r, c| z[order[c] * n + r]);
         fix_signs(&mut eigenvectors);
-        let iteration_seconds = t0.elapsed().as_secs_f64();
-        let report = SolveReport {
+        let stats = RunStats {
             backend: "arpack",
             shift,
             restarts,
             operator_applications: applies,
             factorization_seconds: factor.seconds(),
-            iteration_seconds,
-            residuals: residuals(problem, &eigenvalues, &eigenvectors),
-            orthonormality_error: orthonormality_error(mass, &eigenvectors, 1),
+            iteration_seconds: t0.elapsed().as_secs_f64(),
         };
-        Ok(SpectralBasis {
-            eigenvalues,
-            eigenvectors,
-            mass: DVector::from_column_slice(mass),
-            report,
-        })
+        Ok(finish(problem, eigenvalues, eigenvectors, stats, 1))
     }
 }

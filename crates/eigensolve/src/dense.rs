@@ -5,8 +5,8 @@ use std::time::Instant;
 use faer::{Mat, Side};
 use nalgebra::{DMatrix, DVector};
 
-use crate::verify::{fix_signs, orthonormality_error, residuals};
-use crate::{EigenProblem, EigenSolver, Error, Result, SolveReport, SpectralBasis};
+use crate::verify::{RunStats, finish, fix_signs};
+use crate::{EigenProblem, EigenSolver, Error, Result, SpectralBasis};
 
 /// A dense symmetric eigendecomposition of `M^{-1/2} L M^{-1/2}` (faer's
 /// self-adjoint divide and conquer): exact to rounding, O(n³) time and
@@ -66,21 +66,14 @@ impl EigenSolver for DenseSolver {
         }
         let t0 = Instant::now();
         let (eigenvalues, eigenvectors) = dense_pairs(problem, k, "dense")?;
-        let report = SolveReport {
+        let stats = RunStats {
             backend: "dense",
             shift: 0.0,
             restarts: 0,
             operator_applications: 0,
             factorization_seconds: 0.0,
             iteration_seconds: t0.elapsed().as_secs_f64(),
-            residuals: residuals(problem, &eigenvalues, &eigenvectors),
-            orthonormality_error: orthonormality_error(problem.mass(), &eigenvectors, 1),
         };
-        Ok(SpectralBasis {
-            eigenvalues,
-            eigenvectors,
-            mass: DVector::from_column_slice(problem.mass()),
-            report,
-        })
+        Ok(finish(problem, eigenvalues, eigenvectors, stats, 1))
     }
 }

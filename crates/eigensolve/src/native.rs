@@ -23,8 +23,8 @@ use faer::{Accum, Mat, MatMut, MatRef, Side};
 use nalgebra::{DMatrix, DVector};
 
 use crate::factor::{Factorization, ShiftInvert, par_of};
-use crate::verify::{SplitMix, fix_signs, orthonormality_error, residuals};
-use crate::{EigenProblem, EigenSolver, Error, Result, SolveReport, SpectralBasis};
+use crate::verify::{RunStats, SplitMix, finish, fix_signs};
+use crate::{EigenProblem, EigenSolver, Error, Result, SpectralBasis};
 
 /// Options of the native backend. `Default` converges every eigenpair to
 /// near machine precision (eigenvalues agree with ARPACK's to ~1e-12).
@@ -121,26 +121,15 @@ impl EigenSolver for NativeSolver {
             // way to do the same computation.
             let t0 = Instant::now();
             let (eigenvalues, eigenvectors) = crate::dense::dense_pairs(problem, k, "native")?;
-            let report = SolveReport {
+            let stats = RunStats {
                 backend: "native",
                 shift,
                 restarts: 0,
                 operator_applications: 0,
                 factorization_seconds: 0.0,
                 iteration_seconds: t0.elapsed().as_secs_f64(),
-                residuals: residuals(problem, &eigenvalues, &eigenvectors),
-                orthonormality_error: orthonormality_error(
-                    problem.mass(),
-                    &eigenvectors,
-                    p.threads,
-                ),
             };
-            return Ok(SpectralBasis {
-                eigenvalues,
-                eigenvectors,
-                mass: DVector::from_column_slice(problem.mass()),
-                report,
-            });
+            return Ok(finish(problem, eigenvalues, eigenvectors, stats, p.threads));
         }
         let factor = ShiftInvert::new(problem, shift, p.threads, p.factorization)?;
         let t0 = Instant::now();
@@ -155,23 +144,15 @@ impl EigenSolver for NativeSolver {
             }
         }
         fix_signs(&mut eigenvectors);
-        let iteration_seconds = t0.elapsed().as_secs_f64();
-        let report = SolveReport {
+        let stats = RunStats {
             backend: "native",
             shift,
             restarts,
             operator_applications: applies,
             factorization_seconds: factor.seconds(),
-            iteration_seconds,
-            residuals: residuals(problem, &eigenvalues, &eigenvectors),
-            orthonormality_error: orthonormality_error(problem.mass(), &eigenvectors, p.threads),
+            iteration_seconds: t0.elapsed().as_secs_f64(),
         };
-        Ok(SpectralBasis {
-            eigenvalues,
-            eigenvectors,
-            mass: DVector::from_column_slice(problem.mass()),
-            report,
-        })
+        Ok(finish(problem, eigenvalues, eigenvectors, stats, p.threads))
     }
 }
 

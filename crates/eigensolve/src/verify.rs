@@ -5,14 +5,48 @@ use faer::linalg::matmul::matmul;
 use faer::{Accum, MatRef};
 use nalgebra::{DMatrix, DVector};
 
-use crate::EigenProblem;
+use crate::{EigenProblem, SolveReport, SpectralBasis};
+
+/// What a backend measured while solving; [`finish`] adds the checks.
+pub(crate) struct RunStats {
+    pub backend: &'static str,
+    pub shift: f64,
+    pub restarts: usize,
+    pub operator_applications: usize,
+    pub factorization_seconds: f64,
+    pub iteration_seconds: f64,
+}
+
+/// Assembles the basis and its report: residuals and the M-orthonormality
+/// error are computed here, the same way for every backend (and outside
+/// the timed iteration).
+pub(crate) fn finish(
+    problem: &EigenProblem<'_>,
+    eigenvalues: DVector<f64>,
+    eigenvectors: DMatrix<f64>,
+    stats: RunStats,
+    threads: usize,
+) -> SpectralBasis {
+    let report = SolveReport {
+        backend: stats.backend,
+        shift: stats.shift,
+        restarts: stats.restarts,
+        operator_applications: stats.operator_applications,
+        factorization_seconds: stats.factorization_seconds,
+        iteration_seconds: stats.iteration_seconds,
+        residuals: residuals(problem, &eigenvalues, &eigenvectors),
+        orthonormality_error: orthonormality_error(problem.mass(), &eigenvectors, threads),
+    };
+    SpectralBasis {
+        eigenvalues,
+        eigenvectors,
+        mass: DVector::from_column_slice(problem.mass()),
+        report,
+    }
+}
 
 /// `‖Lφᵢ − λᵢMφᵢ‖_{M⁻¹}` for every column.
-pub(crate) fn residuals(
-    problem: &EigenProblem<'_>,
-    lambda: &DVector<f64>,
-    phi: &DMatrix<f64>,
-) -> Vec<f64> {
+fn residuals(problem: &EigenProblem<'_>, lambda: &DVector<f64>, phi: &DMatrix<f64>) -> Vec<f64> {
     let n = problem.n();
     let k = phi.ncols();
     let l = problem.stiffness();
@@ -41,7 +75,7 @@ pub(crate) fn residuals(
 }
 
 /// `max |ΦᵀMΦ − I|`.
-pub(crate) fn orthonormality_error(mass: &[f64], phi: &DMatrix<f64>, threads: usize) -> f64 {
+fn orthonormality_error(mass: &[f64], phi: &DMatrix<f64>, threads: usize) -> f64 {
     let n = phi.nrows();
     let k = phi.ncols();
     let mut mphi = phi.clone();

@@ -24,7 +24,7 @@ pub fn icosphere(radius: f64, subdivisions: u32) -> TriMesh {
         [-t, 0.0, -1.0],
         [-t, 0.0, 1.0],
     ];
-    let mut f: Vec<[usize; 3]> = vec![
+    let f: Vec<[usize; 3]> = vec![
         [0, 11, 5],
         [0, 5, 1],
         [0, 1, 7],
@@ -46,42 +46,19 @@ pub fn icosphere(radius: f64, subdivisions: u32) -> TriMesh {
         [8, 6, 7],
         [9, 8, 1],
     ];
-    let project = |p: [f64; 3]| {
+    let project = |p: &mut [f64; 3]| {
         let n = (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt();
-        [p[0] / n, p[1] / n, p[2] / n]
+        *p = [radius * p[0] / n, radius * p[1] / n, radius * p[2] / n];
     };
-    for p in &mut v {
-        *p = project(*p);
-    }
+    v.iter_mut().for_each(project);
+    let mut mesh = TriMesh::new(v, f).expect("the icosahedron is valid");
     for _ in 0..subdivisions {
-        let mut mid: HashMap<(usize, usize), usize> = HashMap::new();
-        let mut nf = Vec::with_capacity(4 * f.len());
-        for t in &f {
-            let mut m = [0; 3];
-            for k in 0..3 {
-                let (a, b) = (t[k], t[(k + 1) % 3]);
-                let key = (a.min(b), a.max(b));
-                m[k] = *mid.entry(key).or_insert_with(|| {
-                    let (pa, pb) = (v[a], v[b]);
-                    v.push(project([
-                        (pa[0] + pb[0]) / 2.0,
-                        (pa[1] + pb[1]) / 2.0,
-                        (pa[2] + pb[2]) / 2.0,
-                    ]));
-                    v.len() - 1
-                });
-            }
-            nf.push([t[0], m[0], m[2]]);
-            nf.push([t[1], m[1], m[0]]);
-            nf.push([t[2], m[2], m[1]]);
-            nf.push(m);
-        }
-        f = nf;
+        // Midpoints of vertices on the sphere, pushed back onto it.
+        let (mut v, f) = subdivide(&mesh).into_parts();
+        v.iter_mut().for_each(project);
+        mesh = TriMesh::new(v, f).expect("icosphere construction is valid");
     }
-    for p in &mut v {
-        *p = [p[0] * radius, p[1] * radius, p[2] * radius];
-    }
-    TriMesh::new(v, f).expect("icosphere construction is valid")
+    mesh
 }
 
 /// A torus around the z axis with tube radius `r` and centre-line radius
