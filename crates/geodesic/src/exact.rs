@@ -1,0 +1,336 @@
+//! Exact polyhedral geodesic distances by window propagation.
+//!
+//! The continuous Dijkstra of Mitchell, Mount and Papadimitriou (1987) in
+//! the simple form of Chen and Han (1990) as improved by Xin and Wang
+//! ("Improving Chen and Han's algorithm on the discrete geodesic problem",
+//! ACM TOG 28(4), 2009): a *window* is an interval of an edge lit by one
+//! (pseudo-)source through a sequence of unfolded faces, stored as the
+//! source's position in the edge's own 2D frame plus the distance σ already
+//! travelled to reach that pseudo-source. Windows are processed in order of
+//! their smallest distance; each one is unfolded across the next face and
+//! split into at most two children on the face's other edges. Geodesics
+//! bend only at saddle and boundary vertices, which become pseudo-sources
+//! when reached. Windows are discarded when an endpoint vertex already
+//! offers a shorter path to every point of them (a sufficient condition,
+//! so the result stays exact; see `useless`).
+//!
+//! Everything is intrinsic: only edge lengths are used.
+
+use std::cmp::Ordering;
+use std::collections::BinaryHeap;
+
+use crate::topology::Topology;
+
+/// A lit interval `[b0, b1]` of edge `edge` of face `face`, seen from a
+/// pseudo-source at `(sx, sy)` (`sy >= 0`) in the edge's frame: origin at
+/// the edge's start vertex, x along the edge, y pointing away from `face`.
+/// The window propagates into `face`.
+#[derive(Debug, Clone, Copy)]
+struct Window {
+    face: usize,
+    edge: usize,
+    b0: f64,
+    b1: f64,
+    sx: f64,
+    sy: f64,
+    sigma: f64,
+}
+
+impl Window {
+    fn dist_at(&self, x: f64) -> f64 {
+        self.sigma + ((x - self.sx).powi(2) + self.sy * self.sy).sqrt()
+    }
+
+    fn min_dist(&self) -> f64 {
+        if self.sx >= self.b0 && self.sx <= self.b1 {
+            self.sigma + self.sy
+        } else {
+            self.dist_at(self.b0).min(self.dist_at(self.b1))
+        }
+    }
+}
+
+enum Event {
+    Window(Window),
+    /// A saddle or boundary vertex, reached at this distance, to be
+    /// expanded as a pseudo-source.
+    Vertex(usize, f64),
+}
+
+struct Item {
+    key: f64,
+    seq: u64,
+    event: Event,
+}
+
+impl PartialEq for Item {
+    fn eq(&self, o: &Self) -> bool {
+        self.cmp(o) == Ordering::Equal
+    }
+}
+impl Eq for Item {}
+impl PartialOrd for Item {
+    fn partial_cmp(&self, o: &Self) -> Option<Ordering> {
+        Some(self.cmp(o))
+    }
+}
+impl Ord for Item {
+    // Min-heap on (key, seq): BinaryHeap is a max-heap, so reverse.
+    fn cmp(&self, o: &Self) -> Ordering {
+        o.key.total_cmp(&self.key).then(o.seq.cmp(&self.seq))
+    }
+}
+
+/// Statistics of one propagation.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct ExactStats {
+    /// Windows created.
+    pub windows: u64,
+    /// Windows propagated across a face (the rest were discarded).
+    pub propagated: u64,
+    /// Largest size of the event queue.
+    pub peak_queue: usize,
+}
+
+pub(crate) struct Propagation<'a> {
+    topo: &'a Topology,
+    pub dist: Vec<f64>,
+    heap: BinaryHeap<Item>,
+    seq: u64,
+    pub stats: ExactStats,
+}
+
+/// Relative slack of the pruning tests, so that a window is never
+/// discarded because of rounding in its own contribution.
+const SLACK: f64 = 1e-12;
+
+impl<'a> Propagation<'a> {
+    pub(crate) fn new(topo: &'a Topology) -> Self {
+        Self {
+            topo,
+            dist: vec![f64::INFINITY; topo.ring.len()],
+            heap: BinaryHeap::new(),
+            seq: 0,
+            stats: ExactStats::default(),
+        }
+    }
+
+    /// Runs from the given sources until the queue is empty, or until every
+    /// vertex of `targets` (when given) is final.
+    pub(crate) fn run(&mut self, sources: &[usize], targets: Option<&[usize]>) {
+        for &s in sources {
+            self.dist[s] = 0.0;
+            self.push(0.0, Event::Vertex(s, 0.0));
+        }
+        while let Some(item) = self.heap.pop() {
+            if let Some(t) = targets {
+                // Every remaining event is at least `item.key` away, so a
+                // target with a distance at most that is final.
+                if t.iter().all(|&v| self.dist[v] <= item.key) {
+                    break;
+                }
+            }
+            match item.event {
+                Event::Vertex(v, d) => {
+                    if d <= self.dist[v] {
+                        self.expand_vertex(v, d);
+                    }
+                }
+                Event::Window(w) => self.propagate(&w),
+            }
+        }
+    }
+
+    fn push(&mut self, key: f64, event: Event) {
+        self.seq += 1;
+        self.heap.push(Item {
+            key,
+            seq: self.seq,
+            event,
+        });
+        self.stats.peak_queue = self.stats.peak_queue.max(self.heap.len());
+    }
+
+    /// Lowers the distance of `v`; a pseudo-source vertex is queued for
+    /// expansion.
+    fn relax(&mut self, v: usize, d: f64) {
+        if d < self.dist[v] {
+            self.dist[v] = d;
+            if self.topo.pseudo_source[v] {
+                self.push(d, Event::Vertex(v, d));
+            }
+        }
+    }
+
+    /// Emits a window from vertex `v` (distance `d`) through every face
+    /// around it, onto the edge opposite `v`.
+    fn expand_vertex(&mut self, v: usize, d: f64) {
+        for &(f, k) in &self.topo.ring[v] {
+            let l = self.topo.len[f];
+            // Edge k of f is opposite v. Its endpoints get d + spoke length.
+            let f_ = self.topo.faces[f];
+            let (a, b) = (f_[(k + 1) % 3], f_[(k + 2) % 3]);
+            self.relax(a, d + l[(k + 2) % 3]);
+            self.relax(b, d + l[(k + 1) % 3]);
+            let Some((g, j)) = self.topo.adj[f][k] else {
+                continue;
+            };
+            // v in the frame of edge j of g: x from that edge's start
+            // vertex (b for a consistently oriented mesh, else a), y
+            // towards f (away from g).
+            let lb = l[(k + 1) % 3]; // |v b|
+            let la = l[(k + 2) % 3]; // |v a|
+            let le = l[k];
+            let (near, far) = if self.topo.faces[g][(j + 1) % 3] == b {
+                (lb, la)
+            } else {
+                (la, lb)
+            };
+            let sx = (near * near - far * far + le * le) / (2.0 * le);
+            let sy = (near * near - sx * sx).max(0.0).sqrt();
+            self.add_window(Window {
+                face: g,
+                edge: j,
+                b0: 0.0,
+                b1: le,
+                sx,
+                sy,
+                sigma: d,
+            });
+        }
+    }
+
+    fn add_window(&mut self, w: Window) {
+        let le = self.topo.len[w.face][w.edge];
+        if !(w.b1 - w.b0 > 1e-12 * le) {
+            return;
+        }
+        let f = self.topo.faces[w.face];
+        let (e0, e1) = (f[(w.edge + 1) % 3], f[(w.edge + 2) % 3]);
+        // Endpoint vertices lit by the window get its distance.
+        if w.b0 <= 1e-12 * le {
+            self.relax(e0, w.dist_at(0.0));
+        }
+        if w.b1 >= le * (1.0 - 1e-12) {
+            self.relax(e1, w.dist_at(le));
+        }
+        if self.useless(&w) {
+            return;
+        }
+        self.stats.windows += 1;
+        self.push(w.min_dist(), Event::Window(w));
+    }
+
+    /// A window is useless when one endpoint vertex of its edge already
+    /// reaches every point of the window at least as fast: D(e0) + x <=
+    /// W(x) for all x in [b0, b1] (W(x) − x decreases, so checking x = b1
+    /// suffices), or the same from e1. Any path through the window can
+    /// then be rerouted through that vertex, so dropping it is exact.
+    fn useless(&self, w: &Window) -> bool {
+        let f = self.topo.faces[w.face];
+        let le = self.topo.len[w.face][w.edge];
+        let (e0, e1) = (f[(w.edge + 1) % 3], f[(w.edge + 2) % 3]);
+        let (w0, w1) = (w.dist_at(w.b0), w.dist_at(w.b1));
+        let tol = SLACK * (w1.max(w0) + le);
+        self.dist[e0] + w.b1 < w1 - tol || self.dist[e1] + (le - w.b0) < w0 - tol
+    }
+
+    fn propagate(&mut self, w: &Window) {
+        if self.useless(w) {
+            return;
+        }
+        self.stats.propagated += 1;
+        let t = self.topo;
+        let f = t.faces[w.face];
+        let k = w.edge;
+        let l = t.len[w.face];
+        let le = l[k];
+        let (e0, e1, v3) = (f[(k + 1) % 3], f[(k + 2) % 3], f[k]);
+        // The third vertex in the window frame: below the edge (y < 0).
+        let a = l[(k + 2) % 3]; // |e0 v3| (edge k+2 joins corners k and k+1)
+        let b = l[(k + 1) % 3]; // |e1 v3|
+        let px = (a * a - b * b + le * le) / (2.0 * le);
+        let py = -(a * a - px * px).max(0.0).sqrt();
+        let s = [w.sx, w.sy];
+        // Where the ray from s through v3 crosses the edge line (y = 0).
+        let xv = s[0] + (px - s[0]) * s[1] / (s[1] - py);
+        // v3 is lit when its ray crosses the window, boundary rays included
+        // (a geodesic along an edge through a flat vertex lies on one): it
+        // must be relaxed here, since a child on a boundary edge is never
+        // created.
+        let eps = 1e-12 * le;
+        if xv >= w.b0 - eps && xv <= w.b1 + eps {
+            let d = w.sigma + ((px - s[0]).powi(2) + (py - s[1]).powi(2)).sqrt();
+            self.relax(v3, d);
+        }
+        let pos = |vid: usize| -> [f64; 2] {
+            if vid == e0 {
+                [0.0, 0.0]
+            } else if vid == e1 {
+                [le, 0.0]
+            } else {
+                [px, py]
+            }
+        };
+        // Left part of the wedge (x < xv) exits through edge e0–v3, which is
+        // edge k+2 of f; the right part through e1–v3, edge k+1.
+        let parts = [
+            ((k + 2) % 3, w.b0, w.b1.min(xv), e1),
+            ((k + 1) % 3, w.b0.max(xv), w.b1, e0),
+        ];
+        for (exit, x_lo, x_hi, other) in parts {
+            if !(x_hi > x_lo) {
+                continue;
+            }
+            let Some((g, j)) = t.adj[w.face][exit] else {
+                continue;
+            };
+            // Edge j of g runs from A to B, both on the exit edge.
+            let gf = t.faces[g];
+            let (pa, pb) = (pos(gf[(j + 1) % 3]), pos(gf[(j + 2) % 3]));
+            let lc = l[exit];
+            let u = [(pb[0] - pa[0]) / lc, (pb[1] - pa[1]) / lc];
+            // Normal pointing into f (towards the vertex not on this edge).
+            let po = pos(other);
+            let mut nrm = [-u[1], u[0]];
+            if (po[0] - pa[0]) * nrm[0] + (po[1] - pa[1]) * nrm[1] < 0.0 {
+                nrm = [u[1], -u[0]];
+            }
+            let rel = [s[0] - pa[0], s[1] - pa[1]];
+            let sx = rel[0] * u[0] + rel[1] * u[1];
+            let sy = (rel[0] * nrm[0] + rel[1] * nrm[1]).max(0.0);
+            // Parameters along A->B of the rays through x_lo and x_hi; an
+            // end at v3 (the split point) is set exactly.
+            let param = |x: f64| -> f64 {
+                let dir = [x - s[0], -s[1]];
+                let cr = dir[0] * u[1] - dir[1] * u[0];
+                let num = dir[0] * rel[1] - dir[1] * rel[0];
+                // t with A + t u on the ray: cross(dir, A + t u − s) = 0,
+                // i.e. t = cross(dir, s − A) / cross(dir, u).
+                num / cr
+            };
+            let v3_param = if gf[(j + 1) % 3] == v3 { 0.0 } else { lc };
+            let t_lo = if x_lo == xv { v3_param } else { param(x_lo) };
+            let t_hi = if x_hi == xv { v3_param } else { param(x_hi) };
+            let (mut b0, mut b1) = if t_lo <= t_hi {
+                (t_lo, t_hi)
+            } else {
+                (t_hi, t_lo)
+            };
+            if !(b0.is_finite() && b1.is_finite()) {
+                continue;
+            }
+            b0 = b0.clamp(0.0, lc);
+            b1 = b1.clamp(0.0, lc);
+            self.add_window(Window {
+                face: g,
+                edge: j,
+                b0,
+                b1,
+                sx,
+                sy,
+                sigma: w.sigma,
+            });
+        }
+    }
+}

@@ -1,0 +1,262 @@
+//! Geodesic distances on triangle meshes, from one or several source
+//! vertices to every vertex (or only to chosen targets, stopping early).
+//!
+//! - [`ExactSolver`]: exact polyhedral distances (window propagation, Chen
+//!   and Han 1990 with the improvements of Xin and Wang 2009). Needs an
+//!   edge-manifold mesh without degenerate faces; works with boundaries.
+//! - [`DijkstraSolver`]: shortest paths along mesh edges, an upper bound of
+//!   the geodesic distance (a fast baseline).
+//!
+//! Both implement [`DistanceSolver`]; unreachable vertices (another
+//! connected component) get `f64::INFINITY`, never NaN. Memory is O(n) plus
+//! the event queue per source; [`DistanceSolver::fields`] runs many sources
+//! in parallel (rayon).
+//!
+//! ```
+//! use fmaps_geodesic::{DistanceSolver, ExactSolver};
+//! use fmaps_mesh_io::generate::grid;
+//!
+//! // On a flat grid exact geodesic distance is Euclidean distance.
+//! let mesh = grid(2.0, 1.0, 8, 4);
+//! let d = ExactSolver::new(&mesh)?.distances(&[0])?;
+//! for (p, di) in mesh.vertices().iter().zip(&d) {
+//!     assert!((di - (p[0] * p[0] + p[1] * p[1]).sqrt()).abs() < 1e-12);
+//! }
+//! # Ok::<(), fmaps_geodesic::Error>(())
+//! ```
+#![deny(missing_docs)]
+
+mod exact;
+mod topology;
+
+use std::cmp::Ordering;
+use std::collections::BinaryHeap;
+
+use fmaps_mesh_io::TriMesh;
+use rayon::prelude::*;
+
+pub use exact::ExactStats;
+use topology::Topology;
+
+/// Errors of this crate.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[non_exhaustive]
+pub enum Error {
+    /// A source or target vertex index is out of range.
+    #[error("vertex {index} is out of range: the mesh has {n_vertices} vertices")]
+    VertexOutOfRange {
+        /// The index.
+        index: usize,
+        /// Number of vertices.
+        n_vertices: usize,
+    },
+    /// No source vertex was given.
+    #[error("no source vertex given")]
+    NoSources,
+    /// A face has (numerically) zero area: it cannot be unfolded.
+    #[error("face {face} is degenerate (zero area); exact geodesics need non-degenerate triangles")]
+    DegenerateFace {
+        /// The face.
+        face: usize,
+    },
+    /// An edge is shared by more than two faces.
+    #[error(
+        "edge ({a}, {b}) is shared by more than two faces; exact geodesics need an edge-manifold mesh"
+    )]
+    NonManifoldEdge {
+        /// One end.
+        a: usize,
+        /// The other end.
+        b: usize,
+    },
+}
+
+/// Result alias of this crate.
+pub type Result<T, E = Error> = std::result::Result<T, E>;
+
+/// A geodesic distance method, prepared for one mesh and reusable for many
+/// sources.
+pub trait DistanceSolver: Sync {
+    /// A short name for reports ("exact", "dijkstra").
+    fn name(&self) -> &'static str;
+
+    /// Number of vertices of the mesh.
+    fn n_vertices(&self) -> usize;
+
+    /// Distance from the nearest of `sources` to every vertex.
+    fn distances(&self, sources: &[usize]) -> Result<Vec<f64>>;
+
+    /// Distances from the nearest of `sources` to each of `targets`, in
+    /// order; stops as soon as all targets are final.
+    fn distances_to(&self, sources: &[usize], targets: &[usize]) -> Result<Vec<f64>>;
+
+    /// One full distance field per source, computed in parallel.
+    fn fields(&self, sources: &[usize]) -> Result<Vec<Vec<f64>>> {
+        sources.par_iter().map(|&s| self.distances(&[s])).collect()
+    }
+
+    /// Checks source/target indices.
+    fn check(&self, vertices: &[usize]) -> Result<()> {
+        let n = self.n_vertices();
+        match vertices.iter().find(|&&v| v >= n) {
+            Some(&index) => Err(Error::VertexOutOfRange {
+                index,
+                n_vertices: n,
+            }),
+            None => Ok(()),
+        }
+    }
+}
+
+/// Exact polyhedral geodesic distances (see the crate docs).
+#[derive(Debug, Clone)]
+pub struct ExactSolver {
+    topo: Topology,
+}
+
+impl ExactSolver {
+    /// Prepares the mesh: edge lengths, adjacency, saddle and boundary
+    /// vertices. Fails on degenerate faces and non-manifold edges.
+    pub fn new(mesh: &TriMesh) -> Result<Self> {
+        Ok(Self {
+            topo: Topology::new(mesh, true)?,
+        })
+    }
+
+    /// Like [`DistanceSolver::distances`], also returning propagation
+    /// statistics.
+    pub fn distances_with_stats(&self, sources: &[usize]) -> Result<(Vec<f64>, ExactStats)> {
+        self.check(sources)?;
+        if sources.is_empty() {
+            return Err(Error::NoSources);
+        }
+        let mut p = exact::Propagation::new(&self.topo);
+        p.run(sources, None);
+        Ok((p.dist, p.stats))
+    }
+}
+
+impl DistanceSolver for ExactSolver {
+    fn name(&self) -> &'static str {
+        "exact"
+    }
+
+    fn n_vertices(&self) -> usize {
+        self.topo.ring.len()
+    }
+
+    fn distances(&self, sources: &[usize]) -> Result<Vec<f64>> {
+        Ok(self.distances_with_stats(sources)?.0)
+    }
+
+    fn distances_to(&self, sources: &[usize], targets: &[usize]) -> Result<Vec<f64>> {
+        self.check(sources)?;
+        self.check(targets)?;
+        if sources.is_empty() {
+            return Err(Error::NoSources);
+        }
+        let mut p = exact::Propagation::new(&self.topo);
+        p.run(sources, Some(targets));
+        Ok(targets.iter().map(|&t| p.dist[t]).collect())
+    }
+}
+
+/// Exact distances from one source to every vertex.
+pub fn exact_distance(mesh: &TriMesh, source: usize) -> Result<Vec<f64>> {
+    ExactSolver::new(mesh)?.distances(&[source])
+}
+
+/// Shortest paths along mesh edges (Dijkstra). An upper bound of the
+/// geodesic distance; it works on any mesh, manifold or not.
+#[derive(Debug, Clone)]
+pub struct DijkstraSolver {
+    topo: Topology,
+}
+
+impl DijkstraSolver {
+    /// Prepares the edge graph.
+    pub fn new(mesh: &TriMesh) -> Self {
+        Self {
+            topo: Topology::new(mesh, false).expect("the non-exact topology cannot fail"),
+        }
+    }
+
+    fn run(&self, sources: &[usize], targets: Option<&[usize]>) -> Vec<f64> {
+        #[derive(PartialEq)]
+        struct Q(f64, usize);
+        impl Eq for Q {}
+        impl PartialOrd for Q {
+            fn partial_cmp(&self, o: &Self) -> Option<Ordering> {
+                Some(self.cmp(o))
+            }
+        }
+        impl Ord for Q {
+            fn cmp(&self, o: &Self) -> Ordering {
+                o.0.total_cmp(&self.0).then(o.1.cmp(&self.1))
+            }
+        }
+        let n = self.topo.ring.len();
+        let mut dist = vec![f64::INFINITY; n];
+        let mut done = vec![false; n];
+        let mut heap = BinaryHeap::new();
+        for &s in sources {
+            dist[s] = 0.0;
+            heap.push(Q(0.0, s));
+        }
+        let mut remaining = targets.map(|t| {
+            let mut want = vec![false; n];
+            t.iter().for_each(|&v| want[v] = true);
+            (want, t.len())
+        });
+        while let Some(Q(d, v)) = heap.pop() {
+            if done[v] {
+                continue;
+            }
+            done[v] = true;
+            if let Some((want, left)) = remaining.as_mut() {
+                if want[v] {
+                    want[v] = false;
+                    *left -= 1;
+                    if *left == 0 {
+                        break;
+                    }
+                }
+            }
+            for &(u, l) in &self.topo.neighbours[v] {
+                if d + l < dist[u] {
+                    dist[u] = d + l;
+                    heap.push(Q(d + l, u));
+                }
+            }
+        }
+        dist
+    }
+}
+
+impl DistanceSolver for DijkstraSolver {
+    fn name(&self) -> &'static str {
+        "dijkstra"
+    }
+
+    fn n_vertices(&self) -> usize {
+        self.topo.ring.len()
+    }
+
+    fn distances(&self, sources: &[usize]) -> Result<Vec<f64>> {
+        self.check(sources)?;
+        if sources.is_empty() {
+            return Err(Error::NoSources);
+        }
+        Ok(self.run(sources, None))
+    }
+
+    fn distances_to(&self, sources: &[usize], targets: &[usize]) -> Result<Vec<f64>> {
+        self.check(sources)?;
+        self.check(targets)?;
+        if sources.is_empty() {
+            return Err(Error::NoSources);
+        }
+        let d = self.run(sources, Some(targets));
+        Ok(targets.iter().map(|&t| d[t]).collect())
+    }
+}
