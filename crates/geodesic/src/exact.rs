@@ -200,6 +200,8 @@ impl<'a> Propagation<'a> {
         }
     }
 
+    // `!(a > b)` is meant: a NaN must fail the test and be dropped.
+    #[allow(clippy::neg_cmp_op_on_partial_ord)]
     fn add_window(&mut self, w: Window) {
         let le = self.topo.len[w.face][w.edge];
         if !(w.b1 - w.b0 > 1e-12 * le) {
@@ -235,6 +237,8 @@ impl<'a> Propagation<'a> {
         self.dist[e0] + w.b1 < w1 - tol || self.dist[e1] + (le - w.b0) < w0 - tol
     }
 
+    // `!(a > b)` is meant: a NaN must fail the test and be dropped.
+    #[allow(clippy::neg_cmp_op_on_partial_ord)]
     fn propagate(&mut self, w: &Window) {
         if self.useless(w) {
             return;
