@@ -3,8 +3,11 @@
 //! - `cargo xtask bench [--quick]`: Laplacian assembly and eigensolve on a
 //!   FAUST mesh and its subdivisions, side by side with SciPy, table on
 //!   stdout and `target/bench/eigensolve.json`.
+//! - `cargo xtask geodesic-check`: exact geodesics against tvb-gdist (largest
+//!   relative difference, time per source).
 
 mod bench;
+mod geodesic_check;
 mod util;
 
 use clap::{Parser, Subcommand};
@@ -20,10 +23,13 @@ struct Cli {
 enum Command {
     /// Benchmark the Laplacian and the eigensolvers against SciPy.
     Bench(bench::Args),
+    /// Compare exact geodesics with tvb-gdist (needs the Python peers).
+    GeodesicCheck(geodesic_check::Args),
 }
 
 fn main() -> anyhow::Result<()> {
     match Cli::parse().command {
         Command::Bench(a) => bench::bench(&a),
+        Command::GeodesicCheck(a) => geodesic_check::geodesic_check(&a),
     }
 }

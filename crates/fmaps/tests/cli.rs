@@ -136,3 +136,49 @@ fn bad_input_exits_with_2_and_a_clear_message() {
     assert_eq!(out.status.code(), Some(2), "usage errors exit with 2");
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+#[test]
+fn geodesic_distances_on_a_flat_grid() {
+    let dir = tmpdir("geo");
+    let mesh = dir.join("grid.off");
+    fmaps::mesh_io::write_mesh(&mesh, &fmaps::mesh_io::generate::grid(3.0, 2.0, 6, 4)).unwrap();
+    let out = dir.join("d.txt");
+    let st = fmaps()
+        .args([
+            "geodesic",
+            mesh.to_str().unwrap(),
+            "--source",
+            "0",
+            "--out",
+            out.to_str().unwrap(),
+            "--json",
+        ])
+        .output()
+        .unwrap();
+    assert!(
+        st.status.success(),
+        "{}",
+        String::from_utf8_lossy(&st.stderr)
+    );
+    let v: serde_json::Value = serde_json::from_slice(&st.stdout).unwrap();
+    assert_eq!(v["method"], "exact");
+    let d: Vec<f64> = std::fs::read_to_string(&out)
+        .unwrap()
+        .lines()
+        .map(|l| l.parse().unwrap())
+        .collect();
+    assert_eq!(d.len(), 35);
+    // The far corner (3, 2) is at Euclidean distance sqrt(13).
+    assert!((d[34] - 13f64.sqrt()).abs() < 1e-12);
+    let bad = fmaps()
+        .args(["geodesic", mesh.to_str().unwrap(), "--source", "99"])
+        .output()
+        .unwrap();
+    assert_eq!(bad.status.code(), Some(2));
+    assert!(
+        String::from_utf8(bad.stderr)
+            .unwrap()
+            .contains("vertex 99 is out of range")
+    );
+    std::fs::remove_dir_all(&dir).unwrap();
+}

@@ -11,8 +11,8 @@
 //! split into at most two children on the face's other edges. Geodesics
 //! bend only at saddle and boundary vertices, which become pseudo-sources
 //! when reached. Windows are discarded when an endpoint vertex already
-//! offers a shorter path to every point of them (a sufficient condition,
-//! so the result stays exact; see `useless`).
+//! offers a shorter path to every point of them, and trimmed to the part
+//! no endpoint vertex dominates (exact; see `trim`).
 //!
 //! Everything is intrinsic: only edge lengths are used.
 
@@ -216,33 +216,79 @@ impl<'a> Propagation<'a> {
         if w.b1 >= le * (1.0 - 1e-12) {
             self.relax(e1, w.dist_at(le));
         }
-        if self.useless(&w) {
+        let mut w = w;
+        if !self.trim(&mut w) {
             return;
         }
         self.stats.windows += 1;
         self.push(w.min_dist(), Event::Window(w));
     }
 
-    /// A window is useless when one endpoint vertex of its edge already
-    /// reaches every point of the window at least as fast: D(e0) + x <=
-    /// W(x) for all x in [b0, b1] (W(x) − x decreases, so checking x = b1
-    /// suffices), or the same from e1. Any path through the window can
-    /// then be rerouted through that vertex, so dropping it is exact.
-    fn useless(&self, w: &Window) -> bool {
+    /// Trims a window to the part no endpoint vertex of its edge
+    /// dominates; false when nothing is left.
+    ///
+    /// A point x of the window is dominated by e0 when D(e0) + x < W(x):
+    /// every path through x can be rerouted through e0 (along the edge to
+    /// x, then on the same straight unfolded segment) and made strictly
+    /// shorter, so no geodesic crosses the window at x. Because W(x) − x
+    /// never increases, the points dominated by e0 form an interval at the
+    /// e0 end, bounded by the root of D(e0) + x = σ + |s − (x, 0)|, which
+    /// is x* = (sx² + sy² − c²) / (2 (c + sx)) with c = D(e0) − σ; the same
+    /// holds mirrored for e1. A geodesic point is never dominated (its
+    /// distance is already the shortest), so trimming keeps the result
+    /// exact; a margin of 1e-10 edge lengths absorbs rounding.
+    fn trim(&self, w: &mut Window) -> bool {
         let f = self.topo.faces[w.face];
         let le = self.topo.len[w.face][w.edge];
         let (e0, e1) = (f[(w.edge + 1) % 3], f[(w.edge + 2) % 3]);
-        let (w0, w1) = (w.dist_at(w.b0), w.dist_at(w.b1));
-        let tol = SLACK * (w1.max(w0) + le);
-        self.dist[e0] + w.b1 < w1 - tol || self.dist[e1] + (le - w.b0) < w0 - tol
+        let margin = 1e-10 * le;
+        let tol = SLACK * (w.dist_at(w.b0).max(w.dist_at(w.b1)) + le);
+        let d0 = self.dist[e0];
+        if d0.is_finite() {
+            if d0 + w.b1 < w.dist_at(w.b1) - tol {
+                return false;
+            }
+            if d0 + w.b0 < w.dist_at(w.b0) - tol {
+                let c = d0 - w.sigma;
+                let den = 2.0 * (c + w.sx);
+                if den > 0.0 {
+                    let x = (w.sx * w.sx + w.sy * w.sy - c * c) / den - margin;
+                    if x > w.b0 {
+                        w.b0 = x.min(w.b1);
+                    }
+                }
+            }
+        }
+        let d1 = self.dist[e1];
+        if d1.is_finite() {
+            if d1 + (le - w.b0) < w.dist_at(w.b0) - tol {
+                return false;
+            }
+            if d1 + (le - w.b1) < w.dist_at(w.b1) - tol {
+                // Mirror: x' = le − x, source at le − sx.
+                let c = d1 - w.sigma;
+                let sxm = le - w.sx;
+                let den = 2.0 * (c + sxm);
+                if den > 0.0 {
+                    let xm = (sxm * sxm + w.sy * w.sy - c * c) / den - margin;
+                    let x = le - xm;
+                    if x < w.b1 {
+                        w.b1 = x.max(w.b0);
+                    }
+                }
+            }
+        }
+        w.b1 - w.b0 > 1e-12 * le
     }
 
     // `!(a > b)` is meant: a NaN must fail the test and be dropped.
     #[allow(clippy::neg_cmp_op_on_partial_ord)]
     fn propagate(&mut self, w: &Window) {
-        if self.useless(w) {
+        let mut w = *w;
+        if !self.trim(&mut w) {
             return;
         }
+        let w = &w;
         self.stats.propagated += 1;
         let t = self.topo;
         let f = t.faces[w.face];

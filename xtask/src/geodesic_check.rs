@@ -1,0 +1,148 @@
+//! `cargo xtask geodesic-check`: fmaps' exact geodesics against tvb-gdist
+//! (Kirsanov's exact MMP, through `../shared/peers/geodesics.py`) on FAUST
+//! and TOSCA meshes: largest relative difference and time per source.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use std::time::Instant;
+
+use anyhow::{Context, bail};
+use fmaps::geodesic::{DistanceSolver, ExactSolver};
+use serde_json::Value;
+
+use crate::util::{data_dir, peer_python, peers_dir, run};
+
+/// Options of `cargo xtask geodesic-check`.
+#[derive(clap::Args)]
+pub struct Args {
+    /// Dataset directory (default: FMAPS_DATA or ../shared/datasets).
+    #[arg(long)]
+    data: Option<PathBuf>,
+    /// Python of the peers' venv.
+    #[arg(long)]
+    python: Option<PathBuf>,
+    /// Number of source vertices per mesh (spread over the index range).
+    #[arg(long, default_value_t = 5)]
+    sources: usize,
+}
+
+pub fn geodesic_check(args: &Args) -> anyhow::Result<()> {
+    let data = data_dir(args.data.as_deref()).join("bcicp");
+    let Some(py) = peer_python(args.python.as_deref()) else {
+        bail!("the Python peers are not set up: run ../shared/peers/setup.sh");
+    };
+    let meshes = [
+        data.join("FAUST/vtx_5k/tr_reg_000.off"),
+        data.join("FAUST/vtx_5k/tr_reg_057.off"),
+        data.join("TOSCA_Isometric/vtx_5k/cat0.off"),
+        data.join("TOSCA_Isometric/vtx_5k/michael0.off"),
+    ];
+    let tmp = std::env::temp_dir().join(format!("fmaps-geodesic-check-{}.npy", std::process::id()));
+    println!(
+        "{:<16} {:>6} {:>8} {:>16} {:>14} {:>14} {:>7}",
+        "mesh", "n", "sources", "max rel diff", "fmaps s/src", "gdist s/src", "ratio"
+    );
+    let mut worst = 0.0f64;
+    for mesh_path in meshes.iter().filter(|p| p.exists()) {
+        let mesh = fmaps::mesh_io::read_mesh(mesh_path)?;
+        let n = mesh.n_vertices();
+        let sources: Vec<usize> = (0..args.sources)
+            .map(|i| i * (n - 1) / args.sources.max(1))
+            .collect();
+        let src_args: Vec<String> = sources.iter().map(|s| s.to_string()).collect();
+        let r = run(Command::new(&py)
+            .arg(peers_dir().join("geodesics.py"))
+            .arg(mesh_path)
+            .arg("--sources")
+            .args(&src_args)
+            .args(["--method", "exact", "--out"])
+            .arg(&tmp))?;
+        let peer: Value = serde_json::from_str(&r.stdout)?;
+        let reference = read_npy_f64_2d(&tmp)?;
+        let t = Instant::now();
+        let solver = ExactSolver::new(&mesh)?;
+        let ours: Vec<Vec<f64>> = sources
+            .iter()
+            .map(|&s| solver.distances(&[s]))
+            .collect::<Result<_, _>>()?;
+        let ours_s = t.elapsed().as_secs_f64() / sources.len() as f64;
+        let mut diff = 0.0f64;
+        for (o, g) in ours.iter().zip(&reference) {
+            for (a, b) in o.iter().zip(g) {
+                if *b > 0.0 {
+                    diff = diff.max((a - b).abs() / b);
+                }
+            }
+        }
+        worst = worst.max(diff);
+        let gdist_s = peer["seconds_per_source"]
+            .as_f64()
+            .context("geodesics.py printed no timing")?;
+        println!(
+            "{:<16} {:>6} {:>8} {:>16.2e} {:>14.4} {:>14.4} {:>6.2}x",
+            mesh_path.file_stem().unwrap().to_string_lossy(),
+            n,
+            sources.len(),
+            diff,
+            ours_s,
+            gdist_s,
+            gdist_s / ours_s
+        );
+    }
+    let _ = std::fs::remove_file(&tmp);
+    println!("largest relative difference: {worst:.2e} (required: 1e-6)");
+    if worst > 1e-6 {
+        bail!("exact geodesics disagree with tvb-gdist beyond 1e-6");
+    }
+    Ok(())
+}
+
+/// Reads a C-order little-endian float64 2D `.npy` (as numpy.save writes).
+fn read_npy_f64_2d(path: &Path) -> anyhow::Result<Vec<Vec<f64>>> {
+    let b = std::fs::read(path)?;
+    if b.len() < 10 || &b[..6] != b"\x93NUMPY" {
+        bail!("{} is not a .npy file", path.display());
+    }
+    let (hlen, start) = if b[6] == 1 {
+        (u16::from_le_bytes([b[8], b[9]]) as usize, 10)
+    } else {
+        (u32::from_le_bytes([b[8], b[9], b[10], b[11]]) as usize, 12)
+    };
+    let header = std::str::from_utf8(&b[start..start + hlen])?;
+    if !header.contains("'<f8'") || header.contains("'fortran_order': True") {
+        bail!(
+            "{}: expected a C-order float64 array, header {header}",
+            path.display()
+        );
+    }
+    let shape = header
+        .split("'shape': (")
+        .nth(1)
+        .and_then(|s| s.split(')').next())
+        .context("no shape")?;
+    let dims: Vec<usize> = shape
+        .split(',')
+        .filter(|s| !s.trim().is_empty())
+        .map(|s| s.trim().parse())
+        .collect::<Result<_, _>>()?;
+    let [rows, cols] = dims[..] else {
+        bail!("{}: expected a 2D array", path.display())
+    };
+    let data = &b[start + hlen..];
+    if data.len() != rows * cols * 8 {
+        bail!("{}: truncated data", path.display());
+    }
+    Ok((0..rows)
+        .map(|r| {
+            (0..cols)
+                .map(|c| {
+                    f64::from_le_bytes(
+                        data[(r * cols + c) * 8..(r * cols + c + 1) * 8]
+                            .try_into()
+                            .unwrap(),
+                    )
+                })
+                .collect()
+        })
+        .collect())
+}
