@@ -8,6 +8,7 @@
 //! | [`laplacian`] | `fmaps-laplacian` | cotangent stiffness, lumped/Voronoi mass |
 //! | [`eigensolve`] | `fmaps-eigensolve` | `EigenSolver` trait, native/ARPACK/dense backends, `SpectralBasis` |
 //! | [`geodesic`] | `fmaps-geodesic` | exact polyhedral geodesics, Dijkstra |
+//! | [`eval`] | `fmaps-eval` | benchmark protocol: geodesic errors, curves, dataset loader |
 //!
 //! and provides [`spectrum`], the mesh-to-eigenbasis stage with per-stage
 //! timings, plus [`npy`] for handing results to Python.
@@ -31,6 +32,7 @@ pub mod npy;
 use std::time::Instant;
 
 pub use fmaps_eigensolve as eigensolve;
+pub use fmaps_eval as eval;
 pub use fmaps_geodesic as geodesic;
 pub use fmaps_laplacian as laplacian;
 pub use fmaps_mesh_io as mesh_io;

@@ -70,6 +70,42 @@ enum Command {
         #[arg(long)]
         out: Option<PathBuf>,
     },
+    /// Evaluate a point map against ground truth (normalized geodesic error).
+    #[command(
+        after_help = "Example:\n  fmaps eval --source A.off --target B.off --map A_B.map \\\n      --gt-source corres/A.vts --gt-target corres/B.vts --sym-gt-target corres/B.sym.vts --json\n\n\
+The map file holds, for every vertex of A, a 1-based vertex of B. Errors are\n\
+d_B(T(a_i), b_i) / sqrt(area(B)) (not x100); --json prints mean_error, sym_mean_error,\n\
+auc (area under the cumulative curve on [0, 0.25], normalized), coverage, geodesic, seconds."
+    )]
+    Eval {
+        /// Source mesh A.
+        #[arg(long)]
+        source: PathBuf,
+        /// Target mesh B.
+        #[arg(long)]
+        target: PathBuf,
+        /// The map A -> B (.map, 1-based).
+        #[arg(long)]
+        map: PathBuf,
+        /// Ground truth on A (.vts, 1-based).
+        #[arg(long)]
+        gt_source: PathBuf,
+        /// Ground truth on B (.vts, 1-based), line-aligned with --gt-source.
+        #[arg(long)]
+        gt_target: PathBuf,
+        /// Mirrored ground truth on B (.sym.vts) for the symmetry-aware error.
+        #[arg(long)]
+        sym_gt_target: Option<PathBuf>,
+        /// The reverse map B -> A, for bijectivity.
+        #[arg(long)]
+        reverse_map: Option<PathBuf>,
+        /// Geodesic method.
+        #[arg(long, value_enum, default_value_t = GeodesicMethod::Exact)]
+        geodesic: GeodesicMethod,
+        /// Print one JSON object.
+        #[arg(long)]
+        json: bool,
+    },
     /// Geodesic distances from source vertices to every vertex.
     #[command(
         after_help = "Example:\n  fmaps geodesic tr_reg_000.off --source 0 --out dist.txt\n\n\
@@ -155,6 +191,29 @@ fn main() -> ExitCode {
             out,
             json,
         } => geodesic(&mesh, &source, method, out.as_deref(), json),
+        Command::Eval {
+            source,
+            target,
+            map,
+            gt_source,
+            gt_target,
+            sym_gt_target,
+            reverse_map,
+            geodesic,
+            json,
+        } => eval(
+            &EvalFiles {
+                source,
+                target,
+                map,
+                gt_source,
+                gt_target,
+                sym_gt_target,
+                reverse_map,
+            },
+            geodesic,
+            json,
+        ),
         Command::Spectrum {
             mesh,
             builtin,
@@ -467,6 +526,111 @@ fn geodesic(
         for x in &d {
             outln!(o, "{x:.17e}");
         }
+    }
+    emit(&o)
+}
+
+struct EvalFiles {
+    source: PathBuf,
+    target: PathBuf,
+    map: PathBuf,
+    gt_source: PathBuf,
+    gt_target: PathBuf,
+    sym_gt_target: Option<PathBuf>,
+    reverse_map: Option<PathBuf>,
+}
+
+fn eval(files: &EvalFiles, method: GeodesicMethod, json: bool) -> Result<(), Failure> {
+    use fmaps::eval::{EvalParams, GroundTruth, evaluate};
+    use fmaps::geodesic::{DijkstraSolver, DistanceSolver, ExactSolver};
+    let t = Instant::now();
+    let a = load(&files.source)?;
+    let b = load(&files.target)?;
+    let read_checked = |p: &Path, n: usize, vts: bool| -> Result<Vec<usize>, Failure> {
+        let v = if vts {
+            mesh_io::read_vts(p)
+        } else {
+            mesh_io::read_map(p)
+        }
+        .map_err(input)?;
+        mesh_io::check_indices(&v, n, Some(p)).map_err(input)?;
+        Ok(v)
+    };
+    let t_ab = read_checked(&files.map, b.n_vertices(), false)?;
+    if t_ab.len() != a.n_vertices() {
+        return Err(input(anyhow::anyhow!(
+            "{}: {} lines, but the source mesh has {} vertices (one target per source vertex)",
+            files.map.display(),
+            t_ab.len(),
+            a.n_vertices()
+        )));
+    }
+    let gt = GroundTruth::new(
+        read_checked(&files.gt_source, a.n_vertices(), true)?,
+        read_checked(&files.gt_target, b.n_vertices(), true)?,
+        files
+            .sym_gt_target
+            .as_deref()
+            .map(|p| read_checked(p, b.n_vertices(), true))
+            .transpose()?,
+    )
+    .map_err(input)?;
+    let t_ba = files
+        .reverse_map
+        .as_deref()
+        .map(|p| read_checked(p, a.n_vertices(), false))
+        .transpose()?;
+    let solver: Box<dyn DistanceSolver> = match method {
+        GeodesicMethod::Exact => Box::new(ExactSolver::new(&b).map_err(input)?),
+        GeodesicMethod::Dijkstra => Box::new(DijkstraSolver::new(&b)),
+    };
+    let r = evaluate(
+        &b,
+        solver.as_ref(),
+        &t_ab,
+        &gt,
+        t_ba.as_deref(),
+        &EvalParams::default(),
+    )
+    .map_err(input)?;
+    let seconds = t.elapsed().as_secs_f64();
+    if json {
+        let v = json!({
+            "mean_error": r.mean_error, "sym_mean_error": r.sym_mean_error, "auc": r.auc,
+            "coverage": r.coverage, "bijectivity": r.bijectivity, "geodesic": r.geodesic,
+            "seconds": seconds, "n_points": r.errors.len(),
+            "thresholds": r.thresholds, "curve": r.curve,
+        });
+        return emit(&format!("{v}\n"));
+    }
+    let mut o = String::new();
+    outln!(
+        o,
+        "{} ground-truth points, {} geodesics, {seconds:.3} s",
+        r.errors.len(),
+        r.geodesic
+    );
+    outln!(
+        o,
+        "mean error {:.6} (x100: {:.3})",
+        r.mean_error,
+        100.0 * r.mean_error
+    );
+    if let Some(s) = r.sym_mean_error {
+        outln!(
+            o,
+            "symmetry-aware mean error {s:.6} (x100: {:.3})",
+            100.0 * s
+        );
+    }
+    outln!(
+        o,
+        "AUC on [0, 0.25]: {:.4}; coverage {:.4}",
+        r.auc,
+        r.coverage
+    );
+    if let Some(bij) = r.bijectivity {
+        outln!(o, "bijectivity {bij:.4}");
     }
     emit(&o)
 }

@@ -86,9 +86,19 @@ pub trait DistanceSolver: Sync {
     /// Distance from the nearest of `sources` to every vertex.
     fn distances(&self, sources: &[usize]) -> Result<Vec<f64>>;
 
+    /// Propagates from `sources` only until every vertex of `targets` is
+    /// final, and returns the whole distance array at that point: exact for
+    /// the targets and for every vertex no farther than the farthest
+    /// target; elsewhere an upper bound (possibly infinity) that is at
+    /// least the farthest target's distance.
+    fn distances_until(&self, sources: &[usize], targets: &[usize]) -> Result<Vec<f64>>;
+
     /// Distances from the nearest of `sources` to each of `targets`, in
     /// order; stops as soon as all targets are final.
-    fn distances_to(&self, sources: &[usize], targets: &[usize]) -> Result<Vec<f64>>;
+    fn distances_to(&self, sources: &[usize], targets: &[usize]) -> Result<Vec<f64>> {
+        let d = self.distances_until(sources, targets)?;
+        Ok(targets.iter().map(|&t| d[t]).collect())
+    }
 
     /// One full distance field per source, computed in parallel.
     fn fields(&self, sources: &[usize]) -> Result<Vec<Vec<f64>>> {
@@ -149,7 +159,7 @@ impl DistanceSolver for ExactSolver {
         Ok(self.distances_with_stats(sources)?.0)
     }
 
-    fn distances_to(&self, sources: &[usize], targets: &[usize]) -> Result<Vec<f64>> {
+    fn distances_until(&self, sources: &[usize], targets: &[usize]) -> Result<Vec<f64>> {
         self.check(sources)?;
         self.check(targets)?;
         if sources.is_empty() {
@@ -157,7 +167,7 @@ impl DistanceSolver for ExactSolver {
         }
         let mut p = exact::Propagation::new(&self.topo);
         p.run(sources, Some(targets));
-        Ok(targets.iter().map(|&t| p.dist[t]).collect())
+        Ok(p.dist)
     }
 }
 
@@ -250,13 +260,12 @@ impl DistanceSolver for DijkstraSolver {
         Ok(self.run(sources, None))
     }
 
-    fn distances_to(&self, sources: &[usize], targets: &[usize]) -> Result<Vec<f64>> {
+    fn distances_until(&self, sources: &[usize], targets: &[usize]) -> Result<Vec<f64>> {
         self.check(sources)?;
         self.check(targets)?;
         if sources.is_empty() {
             return Err(Error::NoSources);
         }
-        let d = self.run(sources, Some(targets));
-        Ok(targets.iter().map(|&t| d[t]).collect())
+        Ok(self.run(sources, Some(targets)))
     }
 }
