@@ -3,10 +3,13 @@
 //! - `cargo xtask bench [--quick]`: Laplacian assembly and eigensolve on a
 //!   FAUST mesh and its subdivisions, side by side with SciPy, table on
 //!   stdout and `target/bench/eigensolve.json`.
+//! - `cargo xtask eval [--collection C] [--pairs N]`: the benchmark table
+//!   (published maps today), JSON per method in `target/eval/`.
 //! - `cargo xtask geodesic-check`: exact geodesics against tvb-gdist (largest
 //!   relative difference, time per source).
 
 mod bench;
+mod eval;
 mod geodesic_check;
 mod util;
 
@@ -23,6 +26,8 @@ struct Cli {
 enum Command {
     /// Benchmark the Laplacian and the eigensolvers against SciPy.
     Bench(bench::Args),
+    /// The benchmark table over test pairs (published maps today).
+    Eval(eval::Args),
     /// Compare exact geodesics with tvb-gdist (needs the Python peers).
     GeodesicCheck(geodesic_check::Args),
 }
@@ -30,6 +35,7 @@ enum Command {
 fn main() -> anyhow::Result<()> {
     match Cli::parse().command {
         Command::Bench(a) => bench::bench(&a),
+        Command::Eval(a) => eval::eval(&a),
         Command::GeodesicCheck(a) => geodesic_check::geodesic_check(&a),
     }
 }
