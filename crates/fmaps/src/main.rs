@@ -134,6 +134,8 @@ Vertex indices are 0-based. Several --source give the distance to the nearest on
 enum GeodesicMethod {
     /// Exact polyhedral distances (window propagation).
     Exact,
+    /// The heat method (approximate, fast for many sources).
+    Heat,
     /// Shortest paths along edges (an upper bound).
     Dijkstra,
 }
@@ -485,13 +487,9 @@ fn geodesic(
     out: Option<&Path>,
     json: bool,
 ) -> Result<(), Failure> {
-    use fmaps::geodesic::{DijkstraSolver, DistanceSolver, ExactSolver};
     let mesh = load(path)?;
     let t = Instant::now();
-    let solver: Box<dyn DistanceSolver> = match method {
-        GeodesicMethod::Exact => Box::new(ExactSolver::new(&mesh).map_err(input)?),
-        GeodesicMethod::Dijkstra => Box::new(DijkstraSolver::new(&mesh)),
-    };
+    let solver = distance_solver(&mesh, method)?;
     let d = solver.distances(sources).map_err(input)?;
     let seconds = t.elapsed().as_secs_f64();
     if let Some(out) = out {
@@ -530,6 +528,20 @@ fn geodesic(
     emit(&o)
 }
 
+fn distance_solver(
+    mesh: &TriMesh,
+    method: GeodesicMethod,
+) -> Result<Box<dyn fmaps::geodesic::DistanceSolver>, Failure> {
+    use fmaps::geodesic::{DijkstraSolver, ExactSolver, HeatParams, HeatSolver};
+    Ok(match method {
+        GeodesicMethod::Exact => Box::new(ExactSolver::new(mesh).map_err(input)?),
+        GeodesicMethod::Heat => {
+            Box::new(HeatSolver::new(mesh, &HeatParams::default()).map_err(input)?)
+        }
+        GeodesicMethod::Dijkstra => Box::new(DijkstraSolver::new(mesh)),
+    })
+}
+
 struct EvalFiles {
     source: PathBuf,
     target: PathBuf,
@@ -542,7 +554,6 @@ struct EvalFiles {
 
 fn eval(files: &EvalFiles, method: GeodesicMethod, json: bool) -> Result<(), Failure> {
     use fmaps::eval::{EvalParams, GroundTruth, evaluate};
-    use fmaps::geodesic::{DijkstraSolver, DistanceSolver, ExactSolver};
     let t = Instant::now();
     let a = load(&files.source)?;
     let b = load(&files.target)?;
@@ -580,10 +591,7 @@ fn eval(files: &EvalFiles, method: GeodesicMethod, json: bool) -> Result<(), Fai
         .as_deref()
         .map(|p| read_checked(p, a.n_vertices(), false))
         .transpose()?;
-    let solver: Box<dyn DistanceSolver> = match method {
-        GeodesicMethod::Exact => Box::new(ExactSolver::new(&b).map_err(input)?),
-        GeodesicMethod::Dijkstra => Box::new(DijkstraSolver::new(&b)),
-    };
+    let solver = distance_solver(&b, method)?;
     let r = evaluate(
         &b,
         solver.as_ref(),

@@ -4,6 +4,8 @@
 //! - [`ExactSolver`]: exact polyhedral distances (window propagation, Chen
 //!   and Han 1990 with the improvements of Xin and Wang 2009). Needs an
 //!   edge-manifold mesh without degenerate faces; works with boundaries.
+//! - [`HeatSolver`]: the heat method (Crane et al. 2013) with both linear
+//!   systems prefactored, an approximation for many sources.
 //! - [`DijkstraSolver`]: shortest paths along mesh edges, an upper bound of
 //!   the geodesic distance (a fast baseline).
 //!
@@ -27,6 +29,7 @@
 #![deny(missing_docs)]
 
 mod exact;
+mod heat;
 mod topology;
 
 use std::cmp::Ordering;
@@ -36,6 +39,7 @@ use fmaps_mesh_io::TriMesh;
 use rayon::prelude::*;
 
 pub use exact::ExactStats;
+pub use heat::{HeatParams, HeatSolver};
 use topology::Topology;
 
 /// Errors of this crate.
@@ -59,6 +63,12 @@ pub enum Error {
         /// The face.
         face: usize,
     },
+    /// A parameter is out of range.
+    #[error("invalid parameter: {0}")]
+    InvalidParameter(String),
+    /// A linear system of the heat method could not be factorized.
+    #[error("heat method factorization failed: {0}")]
+    Factorization(String),
     /// An edge is shared by more than two faces.
     #[error(
         "edge ({a}, {b}) is shared by more than two faces; exact geodesics need an edge-manifold mesh"
