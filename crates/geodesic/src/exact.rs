@@ -95,9 +95,68 @@ pub struct ExactStats {
 pub(crate) struct Propagation<'a> {
     topo: &'a Topology,
     pub dist: Vec<f64>,
+    /// Accepted windows per (face, edge) slot, `3 * face + edge`.
+    slots: Vec<Vec<Window>>,
     heap: BinaryHeap<Item>,
     seq: u64,
     pub stats: ExactStats,
+}
+
+/// Points x where two windows on the same edge give equal distances:
+/// σ + |x − s| = σ' + |x − s'| on the edge line, squared twice into a
+/// quadratic (spurious roots only add harmless cuts).
+fn crossings(w: &Window, o: &Window) -> Vec<f64> {
+    let (a, b, a2, b2) = (w.sx, w.sy, o.sx, o.sy);
+    let c = o.sigma - w.sigma;
+    let alpha = 2.0 * (a2 - a);
+    let gamma = a * a + b * b - a2 * a2 - b2 * b2 - c * c;
+    // (αx + γ)² = 4c² ((x − a')² + b'²)
+    let qa = alpha * alpha - 4.0 * c * c;
+    let qb = 2.0 * alpha * gamma + 8.0 * c * c * a2;
+    let qc = gamma * gamma - 4.0 * c * c * (a2 * a2 + b2 * b2);
+    let scale = qa.abs().max(qb.abs()).max(qc.abs());
+    if scale == 0.0 {
+        return Vec::new();
+    }
+    if qa.abs() <= 1e-12 * scale {
+        return if qb != 0.0 {
+            vec![-qc / qb]
+        } else {
+            Vec::new()
+        };
+    }
+    let disc = qb * qb - 4.0 * qa * qc;
+    if disc < 0.0 {
+        return Vec::new();
+    }
+    let r = disc.sqrt();
+    // Numerically stable pair of roots.
+    let q = -0.5 * (qb + qb.signum() * r);
+    let mut out = vec![q / qa];
+    if q != 0.0 {
+        out.push(qc / q);
+    }
+    out
+}
+
+/// Joins touching pieces of one window (same source) back together.
+fn merge(mut pieces: Vec<Window>, le: f64) -> Vec<Window> {
+    pieces.sort_by(|x, y| x.b0.total_cmp(&y.b0));
+    let mut out: Vec<Window> = Vec::with_capacity(pieces.len());
+    for p in pieces {
+        if let Some(last) = out.last_mut() {
+            if p.b0 - last.b1 <= 1e-14 * le
+                && p.sx == last.sx
+                && p.sy == last.sy
+                && p.sigma == last.sigma
+            {
+                last.b1 = last.b1.max(p.b1);
+                continue;
+            }
+        }
+        out.push(p);
+    }
+    out
 }
 
 /// Relative slack of the pruning tests, so that a window is never
@@ -109,6 +168,7 @@ impl<'a> Propagation<'a> {
         Self {
             topo,
             dist: vec![f64::INFINITY; topo.ring.len()],
+            slots: vec![Vec::new(); 3 * topo.faces.len()],
             heap: BinaryHeap::new(),
             seq: 0,
             stats: ExactStats::default(),
@@ -220,8 +280,64 @@ impl<'a> Propagation<'a> {
         if !self.trim(&mut w) {
             return;
         }
-        self.stats.windows += 1;
-        self.push(w.min_dist(), Event::Window(w));
+        for piece in self.trim_by_accepted(w) {
+            self.stats.windows += 1;
+            self.slots[3 * piece.face + piece.edge].push(piece);
+            self.push(piece.min_dist(), Event::Window(piece));
+        }
+    }
+
+    /// The parts of `w` where no window already accepted on the same
+    /// face-edge is at least as short. Exact: a ray of `w` through a point
+    /// where an accepted window `w'` is no longer can be rerouted through
+    /// `w'` (bending there, so not shorter than `w'`'s own continuation),
+    /// and accepted windows are only ever removed where something strictly
+    /// shorter covers them. `W' − W` changes sign only at the roots of a
+    /// quadratic (a hyperbola meets the edge line), so each piece between
+    /// roots is kept or dropped whole, after checking its ends and middle.
+    fn trim_by_accepted(&self, w: Window) -> Vec<Window> {
+        let le = self.topo.len[w.face][w.edge];
+        let mut pieces = vec![w];
+        for o in &self.slots[3 * w.face + w.edge] {
+            let mut next = Vec::with_capacity(pieces.len() + 2);
+            for p in pieces {
+                let (lo, hi) = (p.b0.max(o.b0), p.b1.min(o.b1));
+                if hi - lo <= 1e-12 * le {
+                    next.push(p);
+                    continue;
+                }
+                let mut cuts = vec![p.b0, lo];
+                cuts.extend(crossings(&p, o).into_iter().filter(|&x| x > lo && x < hi));
+                cuts.push(hi);
+                cuts.push(p.b1);
+                cuts.sort_by(f64::total_cmp);
+                cuts.dedup_by(|a, b| (*a - *b).abs() <= 1e-14 * le);
+                for seg in cuts.windows(2) {
+                    let (a, b) = (seg[0], seg[1]);
+                    if b - a <= 1e-12 * le {
+                        continue;
+                    }
+                    let inside = a >= lo - 1e-14 * le && b <= hi + 1e-14 * le;
+                    let dominated = inside && {
+                        let tol = SLACK * (p.dist_at(a) + le);
+                        [a, 0.5 * (a + b), b]
+                            .iter()
+                            .all(|&x| o.dist_at(x) <= p.dist_at(x) + tol)
+                    };
+                    if !dominated {
+                        let mut q = p;
+                        q.b0 = a;
+                        q.b1 = b;
+                        next.push(q);
+                    }
+                }
+            }
+            pieces = merge(next, le);
+            if pieces.is_empty() {
+                break;
+            }
+        }
+        pieces
     }
 
     /// Trims a window to the part no endpoint vertex of its edge
