@@ -163,6 +163,38 @@ pub fn eval(args: &Args) -> anyhow::Result<()> {
     println!(
         "(* some pairs had no map; errors are d/sqrt(area) x100, AUC of the mean cumulative curve on [0, 0.25])"
     );
+    for cname in &collections {
+        let series: Vec<crate::plot::Series> = rows
+            .iter()
+            .filter(|r| r["collection"] == cname.as_str())
+            .map(|r| crate::plot::Series {
+                label: format!(
+                    "{} (mean {:.2}, AUC {:.3})",
+                    r["method"].as_str().unwrap_or(""),
+                    100.0 * r["mean_error"].as_f64().unwrap_or(f64::NAN),
+                    r["auc"].as_f64().unwrap_or(f64::NAN)
+                ),
+                x: serde_json::from_value(r["thresholds"].clone()).unwrap_or_default(),
+                y: serde_json::from_value(r["curve"].clone()).unwrap_or_default(),
+            })
+            .collect();
+        let png = out_dir.join(format!("{cname}-curves.png"));
+        let title = format!("{cname}: cumulative geodesic error");
+        crate::plot::line_plot_png(
+            &png,
+            &crate::plot::Plot {
+                title: &title,
+                x_label: "geodesic error / sqrt(area)",
+                y_label: "fraction of points",
+                x_range: (0.0, params.max_threshold),
+                y_range: (0.0, 1.0),
+                x_ticks: vec![0.0, 0.05, 0.1, 0.15, 0.2, 0.25],
+                y_ticks: vec![0.0, 0.2, 0.4, 0.6, 0.8, 1.0],
+            },
+            &series,
+        )?;
+        println!("curves: {}", png.display());
+    }
     println!("per-pair results: {}", out_dir.display());
     Ok(())
 }

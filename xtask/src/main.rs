@@ -11,6 +11,7 @@
 mod bench;
 mod eval;
 mod geodesic_check;
+mod plot;
 mod util;
 
 use clap::{Parser, Subcommand};

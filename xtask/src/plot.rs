@@ -1,0 +1,172 @@
+//! A small line-plot renderer to PNG: axes, grid, labelled ticks, one
+//! polyline per series and a legend. Text uses the 8x8 bitmap glyphs of
+//! `font8x8` (font data compiled in), so no system font library is needed.
+
+use std::path::Path;
+
+/// One curve.
+pub struct Series {
+    pub label: String,
+    pub x: Vec<f64>,
+    pub y: Vec<f64>,
+}
+
+/// What to draw.
+pub struct Plot<'a> {
+    pub title: &'a str,
+    pub x_label: &'a str,
+    pub y_label: &'a str,
+    pub x_range: (f64, f64),
+    pub y_range: (f64, f64),
+    pub x_ticks: Vec<f64>,
+    pub y_ticks: Vec<f64>,
+}
+
+const W: usize = 900;
+const H: usize = 600;
+const LEFT: usize = 80;
+const RIGHT: usize = 30;
+const TOP: usize = 50;
+const BOTTOM: usize = 70;
+const PALETTE: [[u8; 3]; 8] = [
+    [31, 119, 180],
+    [214, 39, 40],
+    [44, 160, 44],
+    [255, 127, 14],
+    [148, 103, 189],
+    [140, 86, 75],
+    [227, 119, 194],
+    [23, 190, 207],
+];
+
+struct Canvas {
+    px: Vec<u8>,
+}
+
+impl Canvas {
+    fn set(&mut self, x: i64, y: i64, c: [u8; 3]) {
+        if x >= 0 && y >= 0 && (x as usize) < W && (y as usize) < H {
+            let i = 3 * (y as usize * W + x as usize);
+            self.px[i..i + 3].copy_from_slice(&c);
+        }
+    }
+
+    fn line(&mut self, (x0, y0): (f64, f64), (x1, y1): (f64, f64), c: [u8; 3], width: i64) {
+        let steps = ((x1 - x0).abs().max((y1 - y0).abs()).ceil() as usize).max(1);
+        for s in 0..=steps {
+            let t = s as f64 / steps as f64;
+            let (x, y) = (
+                (x0 + t * (x1 - x0)).round() as i64,
+                (y0 + t * (y1 - y0)).round() as i64,
+            );
+            for dx in 0..width {
+                for dy in 0..width {
+                    self.set(x + dx - width / 2, y + dy - width / 2, c);
+                }
+            }
+        }
+    }
+
+    fn text(&mut self, x: i64, y: i64, s: &str, scale: i64, c: [u8; 3]) {
+        for (k, ch) in s.chars().enumerate() {
+            let glyph = font8x8::legacy::BASIC_LEGACY
+                .get(ch as usize)
+                .copied()
+                .unwrap_or([0; 8]);
+            for (row, bits) in glyph.iter().enumerate() {
+                for col in 0..8 {
+                    if bits >> col & 1 == 1 {
+                        for sx in 0..scale {
+                            for sy in 0..scale {
+                                self.set(
+                                    x + (k as i64 * 8 + col) * scale + sx,
+                                    y + row as i64 * scale + sy,
+                                    c,
+                                );
+                            }
+                        }
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// Renders the series to a PNG file.
+pub fn line_plot_png(path: &Path, plot: &Plot<'_>, series: &[Series]) -> anyhow::Result<()> {
+    let mut cv = Canvas {
+        px: vec![255; W * H * 3],
+    };
+    let (x0, x1) = plot.x_range;
+    let (y0, y1) = plot.y_range;
+    let px = |x: f64| LEFT as f64 + (x - x0) / (x1 - x0) * (W - LEFT - RIGHT) as f64;
+    let py = |y: f64| (H - BOTTOM) as f64 - (y - y0) / (y1 - y0) * (H - TOP - BOTTOM) as f64;
+    let grid = [225, 225, 225];
+    let black = [0, 0, 0];
+    for &t in &plot.x_ticks {
+        cv.line((px(t), py(y0)), (px(t), py(y1)), grid, 1);
+        let label = format!("{t}");
+        cv.text(
+            px(t) as i64 - 4 * label.len() as i64,
+            (H - BOTTOM + 8) as i64,
+            &label,
+            1,
+            black,
+        );
+    }
+    for &t in &plot.y_ticks {
+        cv.line((px(x0), py(t)), (px(x1), py(t)), grid, 1);
+        let label = format!("{t}");
+        cv.text(
+            LEFT as i64 - 10 - 8 * label.len() as i64,
+            py(t) as i64 - 4,
+            &label,
+            1,
+            black,
+        );
+    }
+    cv.line((px(x0), py(y0)), (px(x1), py(y0)), black, 2);
+    cv.line((px(x0), py(y0)), (px(x0), py(y1)), black, 2);
+    cv.text(
+        (W / 2) as i64 - 8 * plot.title.len() as i64,
+        15,
+        plot.title,
+        2,
+        black,
+    );
+    cv.text(
+        (W / 2) as i64 - 4 * plot.x_label.len() as i64,
+        (H - 30) as i64,
+        plot.x_label,
+        1,
+        black,
+    );
+    cv.text(8, (TOP - 12) as i64, plot.y_label, 1, black);
+    for (i, s) in series.iter().enumerate() {
+        let c = PALETTE[i % PALETTE.len()];
+        for k in 1..s.x.len().min(s.y.len()) {
+            cv.line(
+                (px(s.x[k - 1]), py(s.y[k - 1])),
+                (px(s.x[k]), py(s.y[k])),
+                c,
+                3,
+            );
+        }
+        // Legend, bottom right.
+        let ly = (H - BOTTOM) as i64 - 20 * (series.len() - i) as i64 - 10;
+        let lx = (W - RIGHT) as i64 - 340;
+        cv.line(
+            (lx as f64, ly as f64 + 4.0),
+            (lx as f64 + 30.0, ly as f64 + 4.0),
+            c,
+            3,
+        );
+        cv.text(lx + 40, ly, &s.label, 1, black);
+    }
+    let file = std::io::BufWriter::new(std::fs::File::create(path)?);
+    let mut enc = png::Encoder::new(file, W as u32, H as u32);
+    enc.set_color(png::ColorType::Rgb);
+    enc.set_depth(png::BitDepth::Eight);
+    enc.write_header()?.write_image_data(&cv.px)?;
+    Ok(())
+}
