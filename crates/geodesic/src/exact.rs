@@ -50,17 +50,13 @@ impl Window {
     }
 }
 
-enum Event {
-    Window(Window),
-    /// A saddle or boundary vertex, reached at this distance, to be
-    /// expanded as a pseudo-source.
-    Vertex(usize, f64),
-}
-
+/// A queue entry: 16 bytes, so the heap sifts cheaply. `code` is a window's
+/// index in the arena (`code & 1 == 0`) or a pseudo-source vertex
+/// (`code & 1 == 1`), shifted left by one.
+#[derive(Clone, Copy)]
 struct Item {
     key: f64,
-    seq: u64,
-    event: Event,
+    code: u64,
 }
 
 impl PartialEq for Item {
@@ -75,9 +71,9 @@ impl PartialOrd for Item {
     }
 }
 impl Ord for Item {
-    // Min-heap on (key, seq): BinaryHeap is a max-heap, so reverse.
+    // Min-heap on (key, code): BinaryHeap is a max-heap, so reverse.
     fn cmp(&self, o: &Self) -> Ordering {
-        o.key.total_cmp(&self.key).then(o.seq.cmp(&self.seq))
+        o.key.total_cmp(&self.key).then(o.code.cmp(&self.code))
     }
 }
 
@@ -95,17 +91,22 @@ pub struct ExactStats {
 pub(crate) struct Propagation<'a> {
     topo: &'a Topology,
     pub dist: Vec<f64>,
+    /// Every accepted window; the queue and the slots refer to it by index.
+    arena: Vec<Window>,
     /// Accepted windows per (face, edge) slot, `3 * face + edge`.
-    slots: Vec<Vec<Window>>,
+    slots: Vec<Vec<u32>>,
+    /// Reused buffers of the pairwise trimming.
+    pieces: Vec<Window>,
+    next: Vec<Window>,
+    cuts: Vec<f64>,
     heap: BinaryHeap<Item>,
-    seq: u64,
     pub stats: ExactStats,
 }
 
 /// Points x where two windows on the same edge give equal distances:
 /// σ + |x − s| = σ' + |x − s'| on the edge line, squared twice into a
 /// quadratic (spurious roots only add harmless cuts).
-fn crossings(w: &Window, o: &Window) -> Vec<f64> {
+fn crossings(w: &Window, o: &Window) -> ([f64; 2], usize) {
     let (a, b, a2, b2) = (w.sx, w.sy, o.sx, o.sy);
     let c = o.sigma - w.sigma;
     let alpha = 2.0 * (a2 - a);
@@ -116,47 +117,51 @@ fn crossings(w: &Window, o: &Window) -> Vec<f64> {
     let qc = gamma * gamma - 4.0 * c * c * (a2 * a2 + b2 * b2);
     let scale = qa.abs().max(qb.abs()).max(qc.abs());
     if scale == 0.0 {
-        return Vec::new();
+        return ([0.0; 2], 0);
     }
     if qa.abs() <= 1e-12 * scale {
         return if qb != 0.0 {
-            vec![-qc / qb]
+            ([-qc / qb, 0.0], 1)
         } else {
-            Vec::new()
+            ([0.0; 2], 0)
         };
     }
     let disc = qb * qb - 4.0 * qa * qc;
     if disc < 0.0 {
-        return Vec::new();
+        return ([0.0; 2], 0);
     }
     let r = disc.sqrt();
     // Numerically stable pair of roots.
     let q = -0.5 * (qb + qb.signum() * r);
-    let mut out = vec![q / qa];
     if q != 0.0 {
-        out.push(qc / q);
+        ([q / qa, qc / q], 2)
+    } else {
+        ([q / qa, 0.0], 1)
     }
-    out
 }
 
 /// Joins touching pieces of one window (same source) back together.
-fn merge(mut pieces: Vec<Window>, le: f64) -> Vec<Window> {
-    pieces.sort_by(|x, y| x.b0.total_cmp(&y.b0));
-    let mut out: Vec<Window> = Vec::with_capacity(pieces.len());
-    for p in pieces {
-        if let Some(last) = out.last_mut() {
-            if p.b0 - last.b1 <= 1e-14 * le
-                && p.sx == last.sx
-                && p.sy == last.sy
-                && p.sigma == last.sigma
-            {
-                last.b1 = last.b1.max(p.b1);
-                continue;
-            }
-        }
-        out.push(p);
+fn merge(pieces: &mut Vec<Window>, le: f64) {
+    if pieces.len() < 2 {
+        return;
     }
-    out
+    pieces.sort_by(|x, y| x.b0.total_cmp(&y.b0));
+    let mut k = 0;
+    for i in 1..pieces.len() {
+        let p = pieces[i];
+        let last = &mut pieces[k];
+        if p.b0 - last.b1 <= 1e-14 * le
+            && p.sx == last.sx
+            && p.sy == last.sy
+            && p.sigma == last.sigma
+        {
+            last.b1 = last.b1.max(p.b1);
+        } else {
+            k += 1;
+            pieces[k] = p;
+        }
+    }
+    pieces.truncate(k + 1);
 }
 
 /// Relative slack of the pruning tests, so that a window is never
@@ -168,9 +173,12 @@ impl<'a> Propagation<'a> {
         Self {
             topo,
             dist: vec![f64::INFINITY; topo.ring.len()],
+            arena: Vec::new(),
             slots: vec![Vec::new(); 3 * topo.faces.len()],
+            pieces: Vec::new(),
+            next: Vec::new(),
+            cuts: Vec::new(),
             heap: BinaryHeap::new(),
-            seq: 0,
             stats: ExactStats::default(),
         }
     }
@@ -180,7 +188,7 @@ impl<'a> Propagation<'a> {
     pub(crate) fn run(&mut self, sources: &[usize], targets: Option<&[usize]>) {
         for &s in sources {
             self.dist[s] = 0.0;
-            self.push(0.0, Event::Vertex(s, 0.0));
+            self.push_vertex(s, 0.0);
         }
         while let Some(item) = self.heap.pop() {
             if let Some(t) = targets {
@@ -190,23 +198,34 @@ impl<'a> Propagation<'a> {
                     break;
                 }
             }
-            match item.event {
-                Event::Vertex(v, d) => {
-                    if d <= self.dist[v] {
-                        self.expand_vertex(v, d);
-                    }
+            let id = (item.code >> 1) as usize;
+            if item.code & 1 == 1 {
+                // A vertex event is stale once the vertex got closer.
+                if item.key <= self.dist[id] {
+                    self.expand_vertex(id, item.key);
                 }
-                Event::Window(w) => self.propagate(&w),
+            } else {
+                let w = self.arena[id];
+                self.propagate(&w);
             }
         }
     }
 
-    fn push(&mut self, key: f64, event: Event) {
-        self.seq += 1;
+    fn push_vertex(&mut self, v: usize, d: f64) {
         self.heap.push(Item {
-            key,
-            seq: self.seq,
-            event,
+            key: d,
+            code: ((v as u64) << 1) | 1,
+        });
+        self.stats.peak_queue = self.stats.peak_queue.max(self.heap.len());
+    }
+
+    fn push_window(&mut self, w: Window) {
+        let id = self.arena.len();
+        self.arena.push(w);
+        self.slots[3 * w.face + w.edge].push(id as u32);
+        self.heap.push(Item {
+            key: w.min_dist(),
+            code: (id as u64) << 1,
         });
         self.stats.peak_queue = self.stats.peak_queue.max(self.heap.len());
     }
@@ -217,7 +236,7 @@ impl<'a> Propagation<'a> {
         if d < self.dist[v] {
             self.dist[v] = d;
             if self.topo.pseudo_source[v] {
-                self.push(d, Event::Vertex(v, d));
+                self.push_vertex(v, d);
             }
         }
     }
@@ -280,11 +299,13 @@ impl<'a> Propagation<'a> {
         if !self.trim(&mut w) {
             return;
         }
-        for piece in self.trim_by_accepted(w) {
+        self.trim_by_accepted(w);
+        let pieces = std::mem::take(&mut self.pieces);
+        for &piece in &pieces {
             self.stats.windows += 1;
-            self.slots[3 * piece.face + piece.edge].push(piece);
-            self.push(piece.min_dist(), Event::Window(piece));
+            self.push_window(piece);
         }
+        self.pieces = pieces;
     }
 
     /// The parts of `w` where no window already accepted on the same
@@ -295,21 +316,27 @@ impl<'a> Propagation<'a> {
     /// shorter covers them. `W' − W` changes sign only at the roots of a
     /// quadratic (a hyperbola meets the edge line), so each piece between
     /// roots is kept or dropped whole, after checking its ends and middle.
-    fn trim_by_accepted(&self, w: Window) -> Vec<Window> {
+    /// Leaves the surviving pieces in `self.pieces`.
+    fn trim_by_accepted(&mut self, w: Window) {
         let le = self.topo.len[w.face][w.edge];
-        let mut pieces = vec![w];
-        for o in &self.slots[3 * w.face + w.edge] {
-            let mut next = Vec::with_capacity(pieces.len() + 2);
-            for p in pieces {
+        let mut pieces = std::mem::take(&mut self.pieces);
+        let mut next = std::mem::take(&mut self.next);
+        let mut cuts = std::mem::take(&mut self.cuts);
+        pieces.clear();
+        pieces.push(w);
+        for &oi in &self.slots[3 * w.face + w.edge] {
+            let o = &self.arena[oi as usize];
+            next.clear();
+            for &p in &pieces {
                 let (lo, hi) = (p.b0.max(o.b0), p.b1.min(o.b1));
                 if hi - lo <= 1e-12 * le {
                     next.push(p);
                     continue;
                 }
-                let mut cuts = vec![p.b0, lo];
-                cuts.extend(crossings(&p, o).into_iter().filter(|&x| x > lo && x < hi));
-                cuts.push(hi);
-                cuts.push(p.b1);
+                cuts.clear();
+                cuts.extend([p.b0, lo, hi, p.b1]);
+                let (r, nr) = crossings(&p, o);
+                cuts.extend(r[..nr].iter().copied().filter(|&x| x > lo && x < hi));
                 cuts.sort_by(f64::total_cmp);
                 cuts.dedup_by(|a, b| (*a - *b).abs() <= 1e-14 * le);
                 for seg in cuts.windows(2) {
@@ -332,12 +359,15 @@ impl<'a> Propagation<'a> {
                     }
                 }
             }
-            pieces = merge(next, le);
+            merge(&mut next, le);
+            std::mem::swap(&mut pieces, &mut next);
             if pieces.is_empty() {
                 break;
             }
         }
-        pieces
+        self.pieces = pieces;
+        self.next = next;
+        self.cuts = cuts;
     }
 
     /// Trims a window to the part no endpoint vertex of its edge
