@@ -279,8 +279,6 @@ impl<'a> Propagation<'a> {
         }
     }
 
-    // `!(a > b)` is meant: a NaN must fail the test and be dropped.
-    #[allow(clippy::neg_cmp_op_on_partial_ord)]
     fn add_window(&mut self, w: Window) {
         let le = self.topo.len[w.face][w.edge];
         if !(w.b1 - w.b0 > 1e-12 * le) {
@@ -427,8 +425,6 @@ impl<'a> Propagation<'a> {
         w.b1 - w.b0 > 1e-12 * le
     }
 
-    // `!(a > b)` is meant: a NaN must fail the test and be dropped.
-    #[allow(clippy::neg_cmp_op_on_partial_ord)]
     fn propagate(&mut self, w: &Window) {
         let mut w = *w;
         if !self.trim(&mut w) {

@@ -7,7 +7,7 @@
 //! [`HeatSolver::new`] and reused for every source.
 
 use fmaps_eigensolve::{EigenProblem, Factorization, ShiftInvert};
-use fmaps_laplacian::{LaplacianParams, cotan_laplacian};
+use fmaps_laplacian::{LaplacianParams, cotan_laplacian_from_lengths, intrinsic_delaunay};
 use fmaps_mesh_io::TriMesh;
 
 use crate::{DistanceSolver, Error, Result};
@@ -54,31 +54,41 @@ impl HeatSolver {
     /// Builds the Laplacian and factorizes `M + tL` and (a tiny shift of)
     /// `L`. Degenerate faces are an error (their gradient is undefined).
     pub fn new(mesh: &TriMesh, params: &HeatParams) -> Result<Self> {
-        let op = cotan_laplacian(mesh, &LaplacianParams::default());
+        // Everything below is intrinsic, on the intrinsic Delaunay
+        // triangulation: L, and gradients/divergence on the same triangles,
+        // each laid out in 2D from its edge lengths.
+        let tri = intrinsic_delaunay(mesh);
+        let op = cotan_laplacian_from_lengths(
+            mesh.n_vertices(),
+            &tri.faces,
+            &tri.lengths,
+            &LaplacianParams::default(),
+        );
         if let Some(&face) = op.skipped_faces.first() {
             return Err(Error::DegenerateFace { face });
         }
-        let v = mesh.vertices();
-        let faces = mesh.faces().to_vec();
+        let faces = tri.faces;
         let mut h_sum = 0.0;
         let mut rot_edges = Vec::with_capacity(faces.len());
         let mut cot = Vec::with_capacity(faces.len());
         let mut edges = Vec::with_capacity(faces.len());
-        for f in &faces {
-            let p = f.map(|i| v[i]);
+        for l in &tri.lengths {
+            // Corner 0 at the origin, corner 1 on the x axis, corner 2 above.
+            let x = (l[1] * l[1] - l[0] * l[0] + l[2] * l[2]) / (2.0 * l[2]);
+            let y = (l[1] * l[1] - x * x).max(0.0).sqrt();
+            let p = [[0.0, 0.0, 0.0], [l[2], 0.0, 0.0], [x, y, 0.0]];
             // e[k]: edge opposite corner k, counter-clockwise.
             let e = [sub(p[2], p[1]), sub(p[0], p[2]), sub(p[1], p[0])];
-            let n = cross(e[2], sub(p[2], p[0]));
-            let a2 = norm(n);
-            let unit = [n[0] / a2, n[1] / a2, n[2] / a2];
-            rot_edges.push(e.map(|ek| cross(unit, ek)));
+            let a2 = l[2] * y;
+            // In the plane, N × e is e turned by +90°.
+            rot_edges.push(e.map(|ek| [-ek[1], ek[0], 0.0]));
             let mut c = [0.0; 3];
             for k in 0..3 {
                 c[k] = -dot(e[(k + 1) % 3], e[(k + 2) % 3]) / a2;
             }
             cot.push(c);
             edges.push(e);
-            h_sum += norm(e[0]) + norm(e[1]) + norm(e[2]);
+            h_sum += l[0] + l[1] + l[2];
         }
         let h = h_sum / (3 * faces.len()) as f64;
         let t = params.t_factor * h * h;
@@ -184,14 +194,6 @@ fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
 
 fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
     a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-}
-
-fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [
-        a[1] * b[2] - a[2] * b[1],
-        a[2] * b[0] - a[0] * b[2],
-        a[0] * b[1] - a[1] * b[0],
-    ]
 }
 
 fn norm(a: [f64; 3]) -> f64 {

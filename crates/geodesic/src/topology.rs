@@ -23,8 +23,6 @@ pub(crate) struct Topology {
 }
 
 impl Topology {
-    // `!(a > b)` is meant: a NaN must fail the test and be dropped.
-    #[allow(clippy::neg_cmp_op_on_partial_ord)]
     pub(crate) fn new(mesh: &TriMesh, exact: bool) -> Result<Self> {
         let v = mesh.vertices();
         let faces = mesh.faces().to_vec();

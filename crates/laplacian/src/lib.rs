@@ -41,6 +41,8 @@
 //! 2-manifolds", 2003 (mixed Voronoi area, Fig. 4).
 #![deny(missing_docs)]
 
+mod intrinsic;
+
 use fmaps_mesh_io::TriMesh;
 use sprs::CsMat;
 
@@ -112,7 +114,62 @@ impl LaplaceOperator {
 pub fn cotan_laplacian(mesh: &TriMesh, params: &LaplacianParams) -> LaplaceOperator {
     let geo = FaceGeometry::compute(mesh);
     let stiffness = assemble_stiffness(mesh.n_vertices(), mesh.faces(), &geo);
-    let mass = mass_from_geometry(mesh, &geo, params.mass);
+    let mass = mass_from_geometry(mesh.n_vertices(), mesh.faces(), &geo, params.mass);
+    LaplaceOperator {
+        stiffness,
+        mass,
+        mass_kind: params.mass,
+        skipped_faces: geo.degenerate,
+    }
+}
+
+/// The cotangent Laplacian of the *intrinsic Delaunay triangulation* of the
+/// mesh: the same vertices and surface, but edges flipped on their lengths
+/// until every interior edge is Delaunay, so that all edge weights are
+/// non-negative (`L_ij ≤ 0`). Robust on poorly shaped meshes where the plain
+/// cotan Laplacian has negative weights (the heat method, for one, needs
+/// it). On an already Delaunay mesh it equals [`cotan_laplacian`].
+/// `skipped_faces` refers to the intrinsic triangles.
+pub fn intrinsic_delaunay_laplacian(mesh: &TriMesh, params: &LaplacianParams) -> LaplaceOperator {
+    let t = intrinsic_delaunay(mesh);
+    cotan_laplacian_from_lengths(mesh.n_vertices(), &t.faces, &t.lengths, params)
+}
+
+/// An intrinsic triangulation: faces over the mesh's vertices and their
+/// edge lengths (`lengths[f][k]` for the edge opposite corner k).
+#[derive(Debug, Clone)]
+#[non_exhaustive]
+pub struct IntrinsicTriangulation {
+    /// Triangles (vertex indices), consistently oriented when the input is.
+    pub faces: Vec<[usize; 3]>,
+    /// Edge lengths per face corner.
+    pub lengths: Vec<[f64; 3]>,
+    /// Number of edge flips performed.
+    pub flips: usize,
+}
+
+/// The intrinsic Delaunay triangulation of a mesh (see
+/// [`intrinsic_delaunay_laplacian`]); boundary and non-manifold edges are
+/// never flipped.
+pub fn intrinsic_delaunay(mesh: &TriMesh) -> IntrinsicTriangulation {
+    let (faces, lengths, flips) = intrinsic::intrinsic_delaunay(mesh);
+    IntrinsicTriangulation {
+        faces,
+        lengths,
+        flips,
+    }
+}
+
+/// The cotangent Laplacian of a triangulation given by edge lengths only.
+pub fn cotan_laplacian_from_lengths(
+    n: usize,
+    faces: &[[usize; 3]],
+    lengths: &[[f64; 3]],
+    params: &LaplacianParams,
+) -> LaplaceOperator {
+    let geo = FaceGeometry::from_lengths(faces, lengths);
+    let stiffness = assemble_stiffness(n, faces, &geo);
+    let mass = mass_from_geometry(n, faces, &geo, params.mass);
     LaplaceOperator {
         stiffness,
         mass,
@@ -131,7 +188,7 @@ pub fn cotan_stiffness(mesh: &TriMesh) -> CsMat<f64> {
 /// The diagonal of the mass matrix alone.
 pub fn mass_diagonal(mesh: &TriMesh, kind: MassKind) -> Vec<f64> {
     let geo = FaceGeometry::compute(mesh);
-    mass_from_geometry(mesh, &geo, kind)
+    mass_from_geometry(mesh.n_vertices(), mesh.faces(), &geo, kind)
 }
 
 /// Per-face cotangents of the three corner angles and the area.
@@ -140,19 +197,57 @@ struct FaceGeometry {
     /// (zero for degenerate faces).
     cot: Vec<[f64; 3]>,
     area: Vec<f64>,
+    /// `len2[f][k]`: squared length of the edge opposite corner k.
+    len2: Vec<[f64; 3]>,
     degenerate: Vec<usize>,
 }
 
 impl FaceGeometry {
+    /// From edge lengths only (`l[f][k]` opposite corner k): the intrinsic
+    /// geometry, used by the intrinsic Delaunay Laplacian.
+    fn from_lengths(faces: &[[usize; 3]], lengths: &[[f64; 3]]) -> Self {
+        let mut cot = Vec::with_capacity(faces.len());
+        let mut area = Vec::with_capacity(faces.len());
+        let mut len2 = Vec::with_capacity(faces.len());
+        let mut degenerate = Vec::new();
+        for (fi, (f, l)) in faces.iter().zip(lengths).enumerate() {
+            let a = triangle_area(*l);
+            let longest = l[0].max(l[1]).max(l[2]);
+            let repeated = f[0] == f[1] || f[1] == f[2] || f[0] == f[2];
+            len2.push(l.map(|x| x * x));
+            if repeated || !(2.0 * a > 1e-14 * longest * longest) {
+                degenerate.push(fi);
+                cot.push([0.0; 3]);
+                area.push(0.0);
+                continue;
+            }
+            let mut c = [0.0; 3];
+            for k in 0..3 {
+                let (x, y, z) = (l[k], l[(k + 1) % 3], l[(k + 2) % 3]);
+                c[k] = (y * y + z * z - x * x) / (4.0 * a);
+            }
+            cot.push(c);
+            area.push(a);
+        }
+        Self {
+            cot,
+            area,
+            len2,
+            degenerate,
+        }
+    }
+
     fn compute(mesh: &TriMesh) -> Self {
         let v = mesh.vertices();
         let faces = mesh.faces();
         let mut cot = Vec::with_capacity(faces.len());
         let mut area = Vec::with_capacity(faces.len());
+        let mut len2 = Vec::with_capacity(faces.len());
         let mut degenerate = Vec::new();
         for (fi, f) in faces.iter().enumerate() {
             let p = f.map(|i| v[i]);
             let e = [sub(p[2], p[1]), sub(p[0], p[2]), sub(p[1], p[0])];
+            len2.push(e.map(|x| dot(x, x)));
             let cr = norm(cross(e[2], sub(p[2], p[0])));
             let longest2 = e.iter().map(|x| dot(*x, *x)).fold(0.0, f64::max);
             let repeated = f[0] == f[1] || f[1] == f[2] || f[0] == f[2];
@@ -176,6 +271,7 @@ impl FaceGeometry {
         Self {
             cot,
             area,
+            len2,
             degenerate,
         }
     }
@@ -249,10 +345,14 @@ fn assemble_stiffness(n: usize, faces: &[[usize; 3]], geo: &FaceGeometry) -> CsM
     CsMat::new_csc((n, n), indptr, indices, data)
 }
 
-fn mass_from_geometry(mesh: &TriMesh, geo: &FaceGeometry, kind: MassKind) -> Vec<f64> {
-    let mut m = vec![0.0; mesh.n_vertices()];
-    let v = mesh.vertices();
-    for (fi, f) in mesh.faces().iter().enumerate() {
+fn mass_from_geometry(
+    n: usize,
+    faces: &[[usize; 3]],
+    geo: &FaceGeometry,
+    kind: MassKind,
+) -> Vec<f64> {
+    let mut m = vec![0.0; n];
+    for (fi, f) in faces.iter().enumerate() {
         let a = geo.area[fi];
         if a == 0.0 {
             continue;
@@ -271,18 +371,27 @@ fn mass_from_geometry(mesh: &TriMesh, geo: &FaceGeometry, kind: MassKind) -> Vec
                         m[f[k]] += if k == obtuse { a / 2.0 } else { a / 4.0 };
                     }
                 } else {
+                    let l2 = geo.len2[fi];
                     for k in 0..3 {
-                        // Corner k gets |e_{k,k+1}|^2 cot(k+2) + |e_{k,k+2}|^2 cot(k+1), over 8.
+                        // Corner k gets |e_{k,k+1}|² cot(k+2) + |e_{k,k+2}|² cot(k+1),
+                        // over 8; the edge (k, k+1) is opposite corner k+2.
                         let (k1, k2) = ((k + 1) % 3, (k + 2) % 3);
-                        let d1 = sub(v[f[k1]], v[f[k]]);
-                        let d2 = sub(v[f[k2]], v[f[k]]);
-                        m[f[k]] += (dot(d1, d1) * c[k2] + dot(d2, d2) * c[k1]) / 8.0;
+                        m[f[k]] += (l2[k2] * c[k2] + l2[k1] * c[k1]) / 8.0;
                     }
                 }
             }
         }
     }
     m
+}
+
+/// Heron's formula in the numerically stable ordering (Kahan).
+pub(crate) fn triangle_area(l: [f64; 3]) -> f64 {
+    let mut s = l;
+    s.sort_by(|x, y| y.total_cmp(x));
+    let (a, b, c) = (s[0], s[1], s[2]);
+    let p = (a + (b + c)) * (c - (a - b)) * (c + (a - b)) * (a + (b - c));
+    0.25 * p.max(0.0).sqrt()
 }
 
 fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {

@@ -195,3 +195,81 @@ fn boundary_edges_have_one_cotangent() {
     let id = |i: usize, j: usize| j * (nx + 1) + i;
     assert!((l[(id(1, 2), id(2, 2))] + 1.0).abs() < 1e-12);
 }
+
+/// A grid whose interior vertices are pushed far enough to create many
+/// obtuse, non-Delaunay configurations (negative cotan weights).
+fn skewed_grid() -> TriMesh {
+    let (nx, ny) = (12, 10);
+    let (mut v, f) = grid(1.0, 1.0, nx, ny).into_parts();
+    for (k, p) in v.iter_mut().enumerate() {
+        let (i, j) = (k % (nx + 1), k / (nx + 1));
+        if i > 0 && i < nx && j > 0 && j < ny {
+            p[0] += 0.45 / nx as f64 * ((k * 7) as f64).sin();
+            p[1] += 0.45 / ny as f64 * ((k * 13) as f64).cos();
+            p[2] = 0.05 * ((k * 3) as f64).sin();
+        }
+    }
+    TriMesh::new(v, f).unwrap()
+}
+
+#[test]
+fn intrinsic_delaunay_equals_cotan_on_delaunay_meshes() {
+    for mesh in [icosphere(1.0, 2), grid(2.0, 1.0, 6, 4)] {
+        let a = dense(&cotan_laplacian(&mesh, &LaplacianParams::default()));
+        let b = dense(&fmaps_laplacian::intrinsic_delaunay_laplacian(
+            &mesh,
+            &LaplacianParams::default(),
+        ));
+        assert!((a - b).amax() < 1e-12);
+    }
+}
+
+#[test]
+fn intrinsic_delaunay_has_nonnegative_weights() {
+    let mesh = skewed_grid();
+    let plain = dense(&cotan_laplacian(&mesh, &LaplacianParams::default()));
+    let negative = (0..plain.nrows())
+        .flat_map(|i| (0..plain.ncols()).map(move |j| (i, j)))
+        .filter(|&(i, j)| i != j && plain[(i, j)] > 1e-12)
+        .count();
+    assert!(negative > 0, "the test mesh must have non-Delaunay edges");
+    for kind in [MassKind::Lumped, MassKind::Voronoi] {
+        let op =
+            fmaps_laplacian::intrinsic_delaunay_laplacian(&mesh, &LaplacianParams::with_mass(kind));
+        let l = dense(&op);
+        let scale = l.amax();
+        assert_eq!(l, l.transpose());
+        for i in 0..op.n() {
+            assert!(l.row(i).sum().abs() <= 1e-13 * scale);
+            for j in 0..op.n() {
+                assert!(
+                    i == j || l[(i, j)] <= 1e-12 * scale,
+                    "L[{i},{j}] = {}",
+                    l[(i, j)]
+                );
+            }
+        }
+        assert!(l.clone().symmetric_eigenvalues().min() >= -1e-12 * scale);
+        let total: f64 = op.mass.iter().sum();
+        assert!((total - mesh.area()).abs() <= 1e-12 * mesh.area());
+        // Rippa / Bobenko–Springborn: the (intrinsic) Delaunay triangulation
+        // minimizes the Dirichlet energy fᵀLf of the piecewise-linear
+        // interpolant of any vertex function.
+        for f in [
+            nalgebra::DVector::from_iterator(
+                op.n(),
+                mesh.vertices().iter().map(|p| p[0] + 0.5 * p[1]),
+            ),
+            nalgebra::DVector::from_iterator(
+                op.n(),
+                (0..op.n()).map(|i| ((i * 37 % 11) as f64).sin()),
+            ),
+        ] {
+            let (e1, e2) = (
+                (f.transpose() * &l * &f)[0],
+                (f.transpose() * &plain * &f)[0],
+            );
+            assert!(e1 <= e2 * (1.0 + 1e-12), "{e1} vs {e2}");
+        }
+    }
+}
