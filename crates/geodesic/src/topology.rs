@@ -45,39 +45,13 @@ impl Topology {
             }
             len.push(l);
         }
-        // Match half-edges through a sort of (min, max, face, k).
-        let mut half: Vec<(usize, usize, usize, usize)> = Vec::with_capacity(3 * faces.len());
-        for (fi, f) in faces.iter().enumerate() {
-            for k in 0..3 {
-                let (a, b) = (f[(k + 1) % 3], f[(k + 2) % 3]);
-                half.push((a.min(b), a.max(b), fi, k));
+        let fa = mesh.face_adjacency();
+        if exact {
+            if let Some(&[a, b]) = fa.non_manifold_edges.first() {
+                return Err(Error::NonManifoldEdge { a, b });
             }
         }
-        half.sort_unstable();
-        let mut adj = vec![[None; 3]; faces.len()];
-        let mut i = 0;
-        while i < half.len() {
-            let mut j = i + 1;
-            while j < half.len() && half[j].0 == half[i].0 && half[j].1 == half[i].1 {
-                j += 1;
-            }
-            match j - i {
-                1 => {}
-                2 => {
-                    let (a, b) = (half[i], half[i + 1]);
-                    adj[a.2][a.3] = Some((b.2, b.3));
-                    adj[b.2][b.3] = Some((a.2, a.3));
-                }
-                _ if exact => {
-                    return Err(Error::NonManifoldEdge {
-                        a: half[i].0,
-                        b: half[i].1,
-                    });
-                }
-                _ => {}
-            }
-            i = j;
-        }
+        let adj = fa.across;
         let mut ring = vec![Vec::new(); n];
         let mut angle = vec![0.0f64; n];
         let mut boundary = vec![false; n];

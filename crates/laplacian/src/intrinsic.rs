@@ -25,34 +25,17 @@ pub(crate) fn intrinsic_delaunay(mesh: &TriMesh) -> (Vec<[usize; 3]>, Vec<[f64; 
         .iter()
         .map(|f| [dist(f[1], f[2]), dist(f[2], f[0]), dist(f[0], f[1])])
         .collect();
-    // Adjacency across edge k of face f (edge k joins corners k+1, k+2).
-    let mut half: Vec<(usize, usize, usize, usize)> = Vec::with_capacity(3 * faces.len());
-    for (fi, f) in faces.iter().enumerate() {
+    // Only manifold edges whose two faces traverse them in opposite
+    // directions (consistent orientation) can be flipped.
+    let mut adj = mesh.face_adjacency().across;
+    for f in 0..faces.len() {
         for k in 0..3 {
-            let (a, b) = (f[(k + 1) % 3], f[(k + 2) % 3]);
-            half.push((a.min(b), a.max(b), fi, k));
-        }
-    }
-    half.sort_unstable();
-    let mut adj: Vec<[Option<(usize, usize)>; 3]> = vec![[None; 3]; faces.len()];
-    let mut i = 0;
-    while i < half.len() {
-        let mut j = i + 1;
-        while j < half.len() && half[j].0 == half[i].0 && half[j].1 == half[i].1 {
-            j += 1;
-        }
-        // Only manifold edges (two faces, opposite orientations) can flip.
-        if j - i == 2 {
-            let (x, y) = (half[i], half[i + 1]);
-            let fx = faces[x.2];
-            let fy = faces[y.2];
-            let opposite = fx[(x.3 + 1) % 3] == fy[(y.3 + 2) % 3];
-            if opposite && x.2 != y.2 {
-                adj[x.2][x.3] = Some((y.2, y.3));
-                adj[y.2][y.3] = Some((x.2, x.3));
+            if let Some((g, j)) = adj[f][k] {
+                if g == f || faces[f][(k + 1) % 3] != faces[g][(j + 2) % 3] {
+                    adj[f][k] = None;
+                }
             }
         }
-        i = j;
     }
     let mut stack: Vec<(usize, usize)> = (0..faces.len())
         .flat_map(|f| (0..3).map(move |k| (f, k)))

@@ -160,6 +160,55 @@ impl TriMesh {
     pub fn validate(&self) -> MeshReport {
         validate::report(self)
     }
+
+    /// The face on the other side of every edge (see [`FaceAdjacency`]).
+    pub fn face_adjacency(&self) -> FaceAdjacency {
+        let faces = &self.faces;
+        // Pair half-edges through a sort of (min, max, face, k).
+        let mut half: Vec<(usize, usize, usize, usize)> = Vec::with_capacity(3 * faces.len());
+        for (fi, f) in faces.iter().enumerate() {
+            for k in 0..3 {
+                let (a, b) = (f[(k + 1) % 3], f[(k + 2) % 3]);
+                half.push((a.min(b), a.max(b), fi, k));
+            }
+        }
+        half.sort_unstable();
+        let mut across = vec![[None; 3]; faces.len()];
+        let mut non_manifold_edges = Vec::new();
+        let mut i = 0;
+        while i < half.len() {
+            let mut j = i + 1;
+            while j < half.len() && half[j].0 == half[i].0 && half[j].1 == half[i].1 {
+                j += 1;
+            }
+            match j - i {
+                1 => {}
+                2 => {
+                    let (x, y) = (half[i], half[i + 1]);
+                    across[x.2][x.3] = Some((y.2, y.3));
+                    across[y.2][y.3] = Some((x.2, x.3));
+                }
+                _ => non_manifold_edges.push([half[i].0, half[i].1]),
+            }
+            i = j;
+        }
+        FaceAdjacency {
+            across,
+            non_manifold_edges,
+        }
+    }
+}
+
+/// Faces across edges. Edge `k` of face `f` is the edge opposite corner
+/// `k`, from corner `k+1` to corner `k+2`.
+#[derive(Debug, Clone, PartialEq)]
+#[non_exhaustive]
+pub struct FaceAdjacency {
+    /// `across[f][k]`: the other face of edge k of face f and the index of
+    /// that edge there; `None` on boundary and non-manifold edges.
+    pub across: Vec<[Option<(usize, usize)>; 3]>,
+    /// Edges with more than two faces, as `[min, max]` vertex pairs.
+    pub non_manifold_edges: Vec<[usize; 2]>,
 }
 
 /// The mesh formats this crate reads and writes.

@@ -125,3 +125,32 @@ fn subdivision_keeps_the_surface() {
         assert_eq!(rs.inconsistently_oriented_edges, 0);
     }
 }
+
+#[test]
+fn face_adjacency_is_mutual_and_none_on_the_boundary() {
+    let t = torus(3.0, 1.0, 8, 6);
+    let a = t.face_adjacency();
+    for (f, row) in a.across.iter().enumerate() {
+        for (k, nb) in row.iter().enumerate() {
+            let (g, j) = nb.expect("a closed torus has no boundary");
+            assert_eq!(a.across[g][j], Some((f, k)));
+            // The shared edge has the same two vertices.
+            let (ff, gg) = (t.faces()[f], t.faces()[g]);
+            let mut e1 = [ff[(k + 1) % 3], ff[(k + 2) % 3]];
+            let mut e2 = [gg[(j + 1) % 3], gg[(j + 2) % 3]];
+            e1.sort_unstable();
+            e2.sort_unstable();
+            assert_eq!(e1, e2);
+        }
+    }
+    let g = grid(1.0, 1.0, 3, 2);
+    let boundary = g
+        .face_adjacency()
+        .across
+        .iter()
+        .flatten()
+        .filter(|x| x.is_none())
+        .count();
+    assert_eq!(boundary, g.validate().boundary_edges);
+    assert!(g.face_adjacency().non_manifold_edges.is_empty());
+}
