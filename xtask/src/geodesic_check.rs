@@ -2,7 +2,7 @@
 //! (Kirsanov's exact MMP, through `../shared/peers/geodesics.py`) on FAUST
 //! and TOSCA meshes: largest relative difference and time per source.
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::process::Command;
 use std::time::Instant;
 
@@ -10,7 +10,7 @@ use anyhow::{Context, bail};
 use fmaps::geodesic::{DistanceSolver, ExactSolver, HeatParams, HeatSolver};
 use serde_json::Value;
 
-use crate::util::{data_dir, peer_python, peers_dir, run};
+use crate::util::{data_dir, peer_python, peers_dir, read_npy_f64_2d, run};
 
 /// Options of `cargo xtask geodesic-check`.
 #[derive(clap::Args)]
@@ -147,54 +147,4 @@ pub fn geodesic_check(args: &Args) -> anyhow::Result<()> {
         bail!("exact geodesics disagree with tvb-gdist beyond 1e-6");
     }
     Ok(())
-}
-
-/// Reads a C-order little-endian float64 2D `.npy` (as numpy.save writes).
-fn read_npy_f64_2d(path: &Path) -> anyhow::Result<Vec<Vec<f64>>> {
-    let b = std::fs::read(path)?;
-    if b.len() < 10 || &b[..6] != b"\x93NUMPY" {
-        bail!("{} is not a .npy file", path.display());
-    }
-    let (hlen, start) = if b[6] == 1 {
-        (u16::from_le_bytes([b[8], b[9]]) as usize, 10)
-    } else {
-        (u32::from_le_bytes([b[8], b[9], b[10], b[11]]) as usize, 12)
-    };
-    let header = std::str::from_utf8(&b[start..start + hlen])?;
-    if !header.contains("'<f8'") || header.contains("'fortran_order': True") {
-        bail!(
-            "{}: expected a C-order float64 array, header {header}",
-            path.display()
-        );
-    }
-    let shape = header
-        .split("'shape': (")
-        .nth(1)
-        .and_then(|s| s.split(')').next())
-        .context("no shape")?;
-    let dims: Vec<usize> = shape
-        .split(',')
-        .filter(|s| !s.trim().is_empty())
-        .map(|s| s.trim().parse())
-        .collect::<Result<_, _>>()?;
-    let [rows, cols] = dims[..] else {
-        bail!("{}: expected a 2D array", path.display())
-    };
-    let data = &b[start + hlen..];
-    if data.len() != rows * cols * 8 {
-        bail!("{}: truncated data", path.display());
-    }
-    Ok((0..rows)
-        .map(|r| {
-            (0..cols)
-                .map(|c| {
-                    f64::from_le_bytes(
-                        data[(r * cols + c) * 8..(r * cols + c + 1) * 8]
-                            .try_into()
-                            .unwrap(),
-                    )
-                })
-                .collect()
-        })
-        .collect())
 }

@@ -5,10 +5,12 @@
 //!   stdout and `target/bench/eigensolve.json`.
 //! - `cargo xtask eval [--collection C] [--pairs N]`: the benchmark table
 //!   (published maps today), JSON per method in `target/eval/`.
+//! - `cargo xtask descriptor-check`: HKS/WKS against pyFM's.
 //! - `cargo xtask geodesic-check`: exact geodesics against tvb-gdist (largest
 //!   relative difference, time per source).
 
 mod bench;
+mod descriptor_check;
 mod eval;
 mod geodesic_check;
 mod plot;
@@ -29,6 +31,8 @@ enum Command {
     Bench(bench::Args),
     /// The benchmark table over test pairs (published maps today).
     Eval(eval::Args),
+    /// Compare HKS/WKS with pyFM's (needs the Python peers).
+    DescriptorCheck(descriptor_check::Args),
     /// Compare exact geodesics with tvb-gdist (needs the Python peers).
     GeodesicCheck(geodesic_check::Args),
 }
@@ -37,6 +41,7 @@ fn main() -> anyhow::Result<()> {
     match Cli::parse().command {
         Command::Bench(a) => bench::bench(&a),
         Command::Eval(a) => eval::eval(&a),
+        Command::DescriptorCheck(a) => descriptor_check::descriptor_check(&a),
         Command::GeodesicCheck(a) => geodesic_check::geodesic_check(&a),
     }
 }

@@ -77,3 +77,61 @@ pub fn run(cmd: &mut Command) -> anyhow::Result<Run> {
         peak_mb: usage.ru_maxrss as f64 / 1024.0,
     })
 }
+
+/// Parses a little-endian float64 `.npy` (C or Fortran order): shape and
+/// data in C (row-major) order.
+pub fn parse_npy_f64(b: &[u8], what: &str) -> anyhow::Result<(Vec<usize>, Vec<f64>)> {
+    if b.len() < 10 || &b[..6] != b"\x93NUMPY" {
+        bail!("{what} is not a .npy file");
+    }
+    let (hlen, start) = if b[6] == 1 {
+        (u16::from_le_bytes([b[8], b[9]]) as usize, 10)
+    } else {
+        (u32::from_le_bytes([b[8], b[9], b[10], b[11]]) as usize, 12)
+    };
+    let header = std::str::from_utf8(&b[start..start + hlen])?;
+    if !header.contains("'<f8'") {
+        bail!("{what}: expected float64 data, header {header}");
+    }
+    let fortran = header.contains("'fortran_order': True");
+    let shape = header
+        .split("'shape': (")
+        .nth(1)
+        .and_then(|s| s.split(')').next())
+        .context("no shape")?;
+    let dims: Vec<usize> = shape
+        .split(',')
+        .filter(|s| !s.trim().is_empty())
+        .map(|s| s.trim().parse())
+        .collect::<Result<_, _>>()?;
+    let count: usize = dims.iter().product();
+    let data = &b[start + hlen..];
+    if data.len() != count * 8 {
+        bail!("{what}: truncated data");
+    }
+    let raw: Vec<f64> = data
+        .chunks_exact(8)
+        .map(|c| f64::from_le_bytes(c.try_into().unwrap()))
+        .collect();
+    if fortran && dims.len() == 2 {
+        let (r, c) = (dims[0], dims[1]);
+        let mut out = vec![0.0; count];
+        for i in 0..r {
+            for j in 0..c {
+                out[i * c + j] = raw[j * r + i];
+            }
+        }
+        return Ok((dims, out));
+    }
+    Ok((dims, raw))
+}
+
+/// Reads a float64 2D `.npy` file as rows.
+pub fn read_npy_f64_2d(path: &Path) -> anyhow::Result<Vec<Vec<f64>>> {
+    let b = std::fs::read(path)?;
+    let (dims, data) = parse_npy_f64(&b, &path.display().to_string())?;
+    let [_, cols] = dims[..] else {
+        bail!("{}: expected a 2D array", path.display())
+    };
+    Ok(data.chunks(cols.max(1)).map(<[f64]>::to_vec).collect())
+}
