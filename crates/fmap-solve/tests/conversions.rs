@@ -1,0 +1,136 @@
+//! Point maps <-> functional maps on shapes with known correspondence.
+
+use fmaps_eigensolve::{EigenProblem, EigenSolver, NativeSolver, SpectralBasis};
+use fmaps_laplacian::{LaplacianParams, cotan_laplacian};
+use fmaps_mesh_io::TriMesh;
+use fmaps_mesh_io::generate::torus;
+use fmaps_solve::*;
+use nalgebra::DMatrix;
+
+fn bumpy() -> TriMesh {
+    let (mut v, f) = torus(2.0, 0.8, 24, 14).into_parts();
+    for (k, p) in v.iter_mut().enumerate() {
+        let s = 1.0 + 0.08 * ((k * 31 % 17) as f64 / 17.0 - 0.5);
+        *p = [p[0] * s, p[1] * s * 1.1, p[2] * (2.0 - s)];
+    }
+    TriMesh::new(v, f).unwrap()
+}
+
+fn basis(mesh: &TriMesh, k: usize) -> SpectralBasis {
+    let op = cotan_laplacian(mesh, &LaplacianParams::default());
+    NativeSolver::default()
+        .solve(
+            &EigenProblem::new(op.stiffness.view(), &op.mass).unwrap(),
+            k,
+        )
+        .unwrap()
+}
+
+/// B is A with its vertices permuted; the bases are computed independently
+/// (eigenvector signs differ). The ground-truth map gives a C that is
+/// diagonal with ±1 entries, and converting back recovers the permutation.
+#[test]
+fn permuted_copy_round_trip() {
+    let a = bumpy();
+    let n = a.n_vertices();
+    let perm: Vec<usize> = (0..n).map(|i| (i * 97 + 13) % n).collect(); // perm[new] = old
+    let mut inv = vec![0; n];
+    for (new, &old) in perm.iter().enumerate() {
+        inv[old] = new;
+    }
+    let (v, f) = a.clone().into_parts();
+    let b = TriMesh::new(
+        perm.iter().map(|&o| v[o]).collect(),
+        f.iter().map(|t| t.map(|o| inv[o])).collect(),
+    )
+    .unwrap();
+    let k = 30;
+    let (ba, bb) = (basis(&a, k), basis(&b, k));
+    // T_BA: vertex y of B is vertex perm[y] of A.
+    let t_ba = perm.clone();
+    let c = fmap_from_point_map(&t_ba, &ba, &bb).unwrap();
+    for i in 0..k {
+        for j in 0..k {
+            let want = if i == j { 1.0 } else { 0.0 };
+            assert!(
+                (c[(i, j)].abs() - want).abs() < 1e-8,
+                "C[{i},{j}] = {}",
+                c[(i, j)]
+            );
+        }
+    }
+    assert_eq!(point_map_from_fmap(&c, &ba, &bb).unwrap(), t_ba);
+    assert_eq!(point_map_from_fmap_adjoint(&c, &ba, &bb).unwrap(), t_ba);
+    // Transfer of the coordinate functions: exact up to the basis truncation,
+    // and the same as transporting through the permutation and projecting.
+    let f_a = DMatrix::from_fn(n, 3, |i, j| a.vertices()[i][j]);
+    let on_b = transfer_functions(&c, &ba, &bb, &f_a).unwrap();
+    let f_b = DMatrix::from_fn(n, 3, |y, j| f_a[(t_ba[y], j)]);
+    let projected = bb.reconstruct(&bb.project(&f_b));
+    assert!((on_b - projected).amax() < 1e-8);
+}
+
+#[test]
+fn nearest_rows_matches_a_naive_search() {
+    // Deterministic pseudo-random data with exact duplicates and near ties.
+    let mut s = 12345u64;
+    let mut rnd = || {
+        s = s
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        ((s >> 11) as f64 / (1u64 << 53) as f64) - 0.5
+    };
+    for d in [1, 3, 17, 64] {
+        let nx = 700;
+        let mut x = DMatrix::from_fn(nx, d, |_, _| rnd());
+        // Row 5 duplicates row 2: a tie resolved to the smaller index.
+        let r2 = x.row(2).into_owned();
+        x.row_mut(5).copy_from(&r2);
+        let mut q = DMatrix::from_fn(300, d, |_, _| rnd());
+        q.row_mut(0).copy_from(&r2);
+        // A query 1e-13 away from row 9: far below the expanded-form rounding
+        // of the other candidates, resolved by the direct re-check.
+        let r9 = x.row(9).map(|v| v + 1e-13);
+        q.row_mut(1).copy_from(&r9);
+        let got = nearest_rows(&x, &q);
+        for (i, &g) in got.iter().enumerate() {
+            let dist = |k: usize| (x.row(k) - q.row(i)).norm_squared();
+            let best = (0..nx)
+                .min_by(|&a, &b| dist(a).total_cmp(&dist(b)).then(a.cmp(&b)))
+                .unwrap();
+            assert_eq!(g, best, "d={d} query {i}");
+        }
+        assert_eq!(got[0], 2);
+        assert_eq!(got[1], 9);
+    }
+}
+
+#[test]
+fn bad_sizes_are_errors() {
+    let b = basis(&bumpy(), 10);
+    let n = b.n();
+    assert!(matches!(
+        fmap_from_point_map(&[0, 1], &b, &b),
+        Err(Error::SizeMismatch { .. })
+    ));
+    let mut bad: Vec<usize> = (0..n).collect();
+    bad[4] = n + 3;
+    assert_eq!(
+        fmap_from_point_map(&bad, &b, &b).unwrap_err(),
+        Error::IndexOutOfRange {
+            at: 4,
+            index: n + 3,
+            n
+        }
+    );
+    let big = DMatrix::zeros(12, 10);
+    assert!(matches!(
+        point_map_from_fmap(&big, &b, &b),
+        Err(Error::SizeMismatch { .. })
+    ));
+    let c = DMatrix::identity(10, 10);
+    assert!(matches!(
+        transfer_functions(&c, &b, &b, &DMatrix::zeros(3, 1)),
+        Err(Error::SizeMismatch { .. })
+    ));
+}
