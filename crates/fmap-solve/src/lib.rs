@@ -30,11 +30,13 @@
 //! ```
 #![deny(missing_docs)]
 
+mod energy;
 mod nn;
 
 use fmaps_eigensolve::SpectralBasis;
 use nalgebra::DMatrix;
 
+pub use energy::{FmapEnergy, laplacian_mask, multiplication_operator, resolvent_mask};
 pub use nn::nearest_rows;
 
 /// Errors of this crate.
@@ -51,6 +53,12 @@ pub enum Error {
         /// Expected.
         expected: usize,
     },
+    /// The energy's normal equations are not positive definite (all
+    /// weights zero, or descriptors that do not constrain C).
+    #[error(
+        "the functional-map energy has no unique minimum (normal equations not positive definite); add descriptors or a positive Laplacian weight"
+    )]
+    NotPositiveDefinite,
     /// A point map refers to a vertex that does not exist.
     #[error("point map entry {at} is {index}, but the target shape has {n} vertices")]
     IndexOutOfRange {
