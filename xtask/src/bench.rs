@@ -6,7 +6,7 @@
 //! (`fmaps spectrum --json`, SciPy through `../shared/peers/eigsh.py`), so
 //! the peak memory reported is that process's own.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::Command;
 use std::time::Instant;
 
@@ -31,12 +31,8 @@ pub struct Args {
     /// Thread counts (both sides: fmaps --threads, OPENBLAS/OMP for SciPy).
     #[arg(long, value_delimiter = ',', default_value = "1,2")]
     threads: Vec<usize>,
-    /// Dataset directory (default: FMAPS_DATA or ../shared/datasets).
-    #[arg(long)]
-    data: Option<PathBuf>,
-    /// Python of the peers' venv (default: ~/.cache/fmaps-peers/bin/python).
-    #[arg(long)]
-    python: Option<PathBuf>,
+    #[command(flatten)]
+    peers: crate::util::PeerArgs,
     /// Skip the ARPACK backend even when the system library is present.
     #[arg(long)]
     no_arpack: bool,
@@ -44,7 +40,7 @@ pub struct Args {
 
 pub fn bench(args: &Args) -> anyhow::Result<()> {
     let root = root();
-    let data = data_dir(args.data.as_deref());
+    let data = data_dir(args.peers.data.as_deref());
     let base = data.join("bcicp/FAUST/vtx_5k/tr_reg_000.off");
     if !base.exists() {
         bail!(
@@ -52,7 +48,7 @@ pub fn bench(args: &Args) -> anyhow::Result<()> {
             base.display()
         );
     }
-    let python = peer_python(args.python.as_deref());
+    let python = peer_python(args.peers.python.as_deref());
     if python.is_none() {
         eprintln!(
             "note: the Python peers are not set up (../shared/peers/setup.sh); SciPy columns stay empty"

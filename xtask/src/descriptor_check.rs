@@ -3,7 +3,6 @@
 //! descriptor code) and from fmaps' basis (the whole pipeline).
 
 use std::io::Read;
-use std::path::PathBuf;
 use std::process::Command;
 
 use anyhow::{Context, bail};
@@ -16,12 +15,8 @@ use crate::util::{data_dir, parse_npy_f64, peer_python, peers_dir, read_npy_f64_
 /// Options of `cargo xtask descriptor-check`.
 #[derive(clap::Args)]
 pub struct Args {
-    /// Dataset directory (default: FMAPS_DATA or ../shared/datasets).
-    #[arg(long)]
-    data: Option<PathBuf>,
-    /// Python of the peers' venv.
-    #[arg(long)]
-    python: Option<PathBuf>,
+    #[command(flatten)]
+    peers: crate::util::PeerArgs,
     /// Eigenpairs.
     #[arg(long, default_value_t = 100)]
     k: usize,
@@ -31,8 +26,8 @@ pub struct Args {
 }
 
 pub fn descriptor_check(args: &Args) -> anyhow::Result<()> {
-    let mesh_path = data_dir(args.data.as_deref()).join("bcicp/FAUST/vtx_5k/tr_reg_000.off");
-    let Some(py) = peer_python(args.python.as_deref()) else {
+    let mesh_path = data_dir(args.peers.data.as_deref()).join("bcicp/FAUST/vtx_5k/tr_reg_000.off");
+    let Some(py) = peer_python(args.peers.python.as_deref()) else {
         bail!("the Python peers are not set up: run ../shared/peers/setup.sh");
     };
     let tmp = std::env::temp_dir().join(format!("fmaps-descr-{}", std::process::id()));

@@ -2,7 +2,6 @@
 //! (Kirsanov's exact MMP, through `../shared/peers/geodesics.py`) on FAUST
 //! and TOSCA meshes: largest relative difference and time per source.
 
-use std::path::PathBuf;
 use std::process::Command;
 use std::time::Instant;
 
@@ -15,20 +14,16 @@ use crate::util::{data_dir, peer_python, peers_dir, read_npy_f64_2d, run};
 /// Options of `cargo xtask geodesic-check`.
 #[derive(clap::Args)]
 pub struct Args {
-    /// Dataset directory (default: FMAPS_DATA or ../shared/datasets).
-    #[arg(long)]
-    data: Option<PathBuf>,
-    /// Python of the peers' venv.
-    #[arg(long)]
-    python: Option<PathBuf>,
+    #[command(flatten)]
+    peers: crate::util::PeerArgs,
     /// Number of source vertices per mesh (spread over the index range).
     #[arg(long, default_value_t = 5)]
     sources: usize,
 }
 
 pub fn geodesic_check(args: &Args) -> anyhow::Result<()> {
-    let data = data_dir(args.data.as_deref()).join("bcicp");
-    let Some(py) = peer_python(args.python.as_deref()) else {
+    let data = data_dir(args.peers.data.as_deref()).join("bcicp");
+    let Some(py) = peer_python(args.peers.python.as_deref()) else {
         bail!("the Python peers are not set up: run ../shared/peers/setup.sh");
     };
     let meshes = [

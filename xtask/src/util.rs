@@ -6,6 +6,17 @@ use std::process::{Command, Stdio};
 
 use anyhow::{Context, bail};
 
+/// Where the data and the Python peers are (shared by the xtask commands).
+#[derive(clap::Args)]
+pub struct PeerArgs {
+    /// Dataset directory (default: FMAPS_DATA or ../shared/datasets).
+    #[arg(long)]
+    pub data: Option<PathBuf>,
+    /// Python of the peers' venv (default: ~/.cache/fmaps-peers/bin/python).
+    #[arg(long)]
+    pub python: Option<PathBuf>,
+}
+
 /// The workspace root (the parent of this crate's directory).
 pub fn root() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR"))

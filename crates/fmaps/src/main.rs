@@ -78,27 +78,8 @@ d_B(T(a_i), b_i) / sqrt(area(B)) (not x100); --json prints mean_error, sym_mean_
 auc (area under the cumulative curve on [0, 0.25], normalized), coverage, geodesic, seconds."
     )]
     Eval {
-        /// Source mesh A.
-        #[arg(long)]
-        source: PathBuf,
-        /// Target mesh B.
-        #[arg(long)]
-        target: PathBuf,
-        /// The map A -> B (.map, 1-based).
-        #[arg(long)]
-        map: PathBuf,
-        /// Ground truth on A (.vts, 1-based).
-        #[arg(long)]
-        gt_source: PathBuf,
-        /// Ground truth on B (.vts, 1-based), line-aligned with --gt-source.
-        #[arg(long)]
-        gt_target: PathBuf,
-        /// Mirrored ground truth on B (.sym.vts) for the symmetry-aware error.
-        #[arg(long)]
-        sym_gt_target: Option<PathBuf>,
-        /// The reverse map B -> A, for bijectivity.
-        #[arg(long)]
-        reverse_map: Option<PathBuf>,
+        #[command(flatten)]
+        files: EvalFiles,
         /// Geodesic method.
         #[arg(long, value_enum, default_value_t = GeodesicMethod::Exact)]
         geodesic: GeodesicMethod,
@@ -194,28 +175,10 @@ fn main() -> ExitCode {
             json,
         } => geodesic(&mesh, &source, method, out.as_deref(), json),
         Command::Eval {
-            source,
-            target,
-            map,
-            gt_source,
-            gt_target,
-            sym_gt_target,
-            reverse_map,
+            files,
             geodesic,
             json,
-        } => eval(
-            &EvalFiles {
-                source,
-                target,
-                map,
-                gt_source,
-                gt_target,
-                sym_gt_target,
-                reverse_map,
-            },
-            geodesic,
-            json,
-        ),
+        } => eval(&files, geodesic, json),
         Command::Spectrum {
             mesh,
             builtin,
@@ -542,13 +505,29 @@ fn distance_solver(
     })
 }
 
+/// The files of `fmaps eval`.
+#[derive(clap::Args)]
 struct EvalFiles {
+    /// Source mesh A.
+    #[arg(long)]
     source: PathBuf,
+    /// Target mesh B.
+    #[arg(long)]
     target: PathBuf,
+    /// The map A -> B (.map, 1-based).
+    #[arg(long)]
     map: PathBuf,
+    /// Ground truth on A (.vts, 1-based).
+    #[arg(long)]
     gt_source: PathBuf,
+    /// Ground truth on B (.vts, 1-based), line-aligned with --gt-source.
+    #[arg(long)]
     gt_target: PathBuf,
+    /// Mirrored ground truth on B (.sym.vts) for the symmetry-aware error.
+    #[arg(long)]
     sym_gt_target: Option<PathBuf>,
+    /// The reverse map B -> A, for bijectivity.
+    #[arg(long)]
     reverse_map: Option<PathBuf>,
 }
 

@@ -182,3 +182,73 @@ fn geodesic_distances_on_a_flat_grid() {
     );
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+#[test]
+fn eval_of_an_identity_and_a_shifted_map() {
+    let dir = tmpdir("eval");
+    let mesh = dir.join("g.off");
+    let m = fmaps::mesh_io::generate::grid(1.0, 1.0, 4, 4); // 25 vertices, area 1
+    fmaps::mesh_io::write_mesh(&mesh, &m).unwrap();
+    let n = m.n_vertices();
+    let all: Vec<usize> = (0..n).collect();
+    fmaps::mesh_io::write_vts(dir.join("g.vts"), &all).unwrap();
+    fmaps::mesh_io::write_map(dir.join("id.map"), &all).unwrap();
+    // One step to the right (0.25), the last column stays: mean 0.25 * 20/25.
+    let shifted: Vec<usize> = (0..n).map(|v| if v % 5 < 4 { v + 1 } else { v }).collect();
+    fmaps::mesh_io::write_map(dir.join("shift.map"), &shifted).unwrap();
+    let run = |map: &str| -> serde_json::Value {
+        let p = |f: &str| dir.join(f).to_str().unwrap().to_string();
+        let out = fmaps()
+            .args([
+                "eval",
+                "--source",
+                &p("g.off"),
+                "--target",
+                &p("g.off"),
+                "--map",
+                &p(map),
+            ])
+            .args([
+                "--gt-source",
+                &p("g.vts"),
+                "--gt-target",
+                &p("g.vts"),
+                "--json",
+            ])
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        serde_json::from_slice(&out.stdout).unwrap()
+    };
+    let id = run("id.map");
+    assert_eq!(id["mean_error"], 0.0);
+    assert_eq!(id["auc"], 1.0);
+    assert_eq!(id["coverage"], 1.0);
+    assert_eq!(id["geodesic"], "exact");
+    let sh = run("shift.map");
+    assert!((sh["mean_error"].as_f64().unwrap() - 0.2).abs() < 1e-12);
+    assert!((sh["coverage"].as_f64().unwrap() - 0.8).abs() < 1e-12);
+    // A map with the wrong number of lines is an input error (exit 2).
+    fmaps::mesh_io::write_map(dir.join("short.map"), &all[..3]).unwrap();
+    let p = |f: &str| dir.join(f).to_str().unwrap().to_string();
+    let out = fmaps()
+        .args([
+            "eval",
+            "--source",
+            &p("g.off"),
+            "--target",
+            &p("g.off"),
+            "--map",
+            &p("short.map"),
+        ])
+        .args(["--gt-source", &p("g.vts"), "--gt-target", &p("g.vts")])
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8(out.stderr).unwrap().contains("3 lines"));
+    std::fs::remove_dir_all(&dir).unwrap();
+}
