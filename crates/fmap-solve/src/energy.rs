@@ -1,22 +1,34 @@
 //! The functional-map energy and its exact minimizer.
 //!
 //! For descriptor coefficients `A` (k_A x p) on A and `B` (k_B x p) on B,
-//! eigenvalues of both shapes, and pairs of descriptor multiplication
-//! operators `X_q = Φ_Aᵀ M_A diag(d_q) Φ_A`, `Y_q` likewise on B:
+//! eigenvalues of both shapes, pairs of descriptor multiplication operators
+//! `X_q = Φ_Aᵀ M_A diag(d_q) Φ_A`, `Y_q` likewise on B, and pairs of
+//! orientation operators `(U_q, V_q)` (see [`orientation_operators`](crate::orientation_operators)):
 //!
 //! ```text
-//! E(C) = w_descr ‖C A − B‖²                       descriptor preservation
-//!      + w_lap   Σ_ij mask_ij C_ij²               Laplacian commutativity
-//!      + w_dcomm Σ_q ‖C X_q − Y_q C‖²             descriptor commutativity
+//! E(C) = w_descr  ‖C A − B‖²                      descriptor preservation
+//!      + w_lap    Σ_ij mask_ij C_ij²              Laplacian commutativity
+//!      + w_dcomm  Σ_q ‖C X_q − Y_q C‖²            descriptor commutativity
+//!      + w_orient Σ_q ‖C U_q − V_q C‖²            orientation preservation
 //! ```
 //!
 //! with `mask_ij = (λ_A,j − λ_B,i)²` (the commutativity of Ovsjanikov et
 //! al. 2012) or the bounded resolvent mask of Ren et al. 2019. E is a
 //! convex quadratic in C: its minimum solves linear normal equations, so it
-//! is computed exactly (no iterative optimizer). Without the descriptor
-//! commutativity term the rows of C decouple into k_B systems of size k_A.
+//! is computed exactly (no iterative optimizer). Without operator terms the
+//! rows of C decouple into k_B systems of size k_A. With them, the normal
+//! equations in vec(C) are assembled from Kronecker structure: the
+//! `Σ_q X_q X_qᵀ ⊗ I` and `I ⊗ Σ_q Y_qᵀ Y_q` parts are two small GEMMs and
+//! all the cross terms `Σ_q X_q ⊗ Y_q` one GEMM of the stacked operators,
+//! then one dense Cholesky factorization.
+//!
+//! Optionally the first column of C (the image of the constant function)
+//! is held fixed, as pyFM does: C maps constants to constants, with the
+//! scale `sqrt(area_B / area_A)` and the sign of the two first
+//! eigenvectors. The minimum is then over the remaining columns.
 
-use faer::Side;
+use faer::linalg::matmul::matmul;
+use faer::{Accum, Mat, MatRef, Par, Side};
 use nalgebra::{DMatrix, DVector};
 
 use crate::{Error, Result};
@@ -60,6 +72,9 @@ pub fn multiplication_operator(phi: &DMatrix<f64>, mass: &DVector<f64>, d: &[f64
     phi.tr_mul(&w)
 }
 
+/// Pairs of operators (on A: k_A x k_A, on B: k_B x k_B).
+pub type OperatorPairs = Vec<(DMatrix<f64>, DMatrix<f64>)>;
+
 /// The terms and weights of the energy (see the module docs).
 #[derive(Debug, Clone)]
 pub struct FmapEnergy {
@@ -70,17 +85,42 @@ pub struct FmapEnergy {
     /// Laplacian commutativity weights (k_B x k_A).
     pub lap_mask: DMatrix<f64>,
     /// Pairs of multiplication operators (k_A x k_A, k_B x k_B).
-    pub ops: Vec<(DMatrix<f64>, DMatrix<f64>)>,
+    pub ops: OperatorPairs,
+    /// Pairs of orientation operators (k_A x k_A, k_B x k_B).
+    pub orient_ops: OperatorPairs,
     /// Weight of descriptor preservation.
     pub w_descr: f64,
     /// Weight of Laplacian commutativity.
     pub w_lap: f64,
     /// Weight of descriptor commutativity.
     pub w_dcomm: f64,
+    /// Weight of orientation preservation.
+    pub w_orient: f64,
+    /// When set, the first column of C (length k_B) is fixed to this value
+    /// and only the other columns are optimized.
+    pub fixed_first_column: Option<DVector<f64>>,
 }
 
 impl FmapEnergy {
-    fn dims(&self) -> Result<(usize, usize)> {
+    /// Descriptor preservation alone (weight 1), with the given Laplacian
+    /// mask at weight 0 and no operators; set the other fields as needed.
+    pub fn new(descr_a: DMatrix<f64>, descr_b: DMatrix<f64>, lap_mask: DMatrix<f64>) -> Self {
+        FmapEnergy {
+            descr_a,
+            descr_b,
+            lap_mask,
+            ops: Vec::new(),
+            orient_ops: Vec::new(),
+            w_descr: 1.0,
+            w_lap: 0.0,
+            w_dcomm: 0.0,
+            w_orient: 0.0,
+            fixed_first_column: None,
+        }
+    }
+
+    /// (k_A, k_B) after checking every size.
+    pub fn dims(&self) -> Result<(usize, usize)> {
         let (ka, kb) = (self.descr_a.nrows(), self.descr_b.nrows());
         if self.descr_a.ncols() != self.descr_b.ncols() {
             return Err(Error::SizeMismatch {
@@ -89,74 +129,118 @@ impl FmapEnergy {
                 expected: self.descr_a.ncols(),
             });
         }
-        if self.lap_mask.shape() != (kb, ka) {
+        if self.lap_mask.nrows() != kb {
             return Err(Error::SizeMismatch {
                 what: "Laplacian mask rows (k_B)",
                 found: self.lap_mask.nrows(),
                 expected: kb,
             });
         }
-        for (x, y) in &self.ops {
-            if x.shape() != (ka, ka) || y.shape() != (kb, kb) {
+        if self.lap_mask.ncols() != ka {
+            return Err(Error::SizeMismatch {
+                what: "Laplacian mask columns (k_A)",
+                found: self.lap_mask.ncols(),
+                expected: ka,
+            });
+        }
+        for (x, y) in self.ops.iter().chain(&self.orient_ops) {
+            if x.shape() != (ka, ka) {
                 return Err(Error::SizeMismatch {
-                    what: "multiplication operator size",
+                    what: "operator on A (k_A x k_A)",
                     found: x.nrows(),
                     expected: ka,
+                });
+            }
+            if y.shape() != (kb, kb) {
+                return Err(Error::SizeMismatch {
+                    what: "operator on B (k_B x k_B)",
+                    found: y.nrows(),
+                    expected: kb,
+                });
+            }
+        }
+        if let Some(c0) = &self.fixed_first_column {
+            if c0.len() != kb {
+                return Err(Error::SizeMismatch {
+                    what: "fixed first column length (k_B)",
+                    found: c0.len(),
+                    expected: kb,
                 });
             }
         }
         Ok((ka, kb))
     }
 
+    fn op_terms(&self) -> impl Iterator<Item = (f64, &(DMatrix<f64>, DMatrix<f64>))> {
+        let d = self.ops.iter().map(|p| (self.w_dcomm, p));
+        let o = self.orient_ops.iter().map(|p| (self.w_orient, p));
+        d.chain(o).filter(|(w, _)| *w != 0.0)
+    }
+
     /// The energy of `c` (k_B x k_A).
     pub fn value(&self, c: &DMatrix<f64>) -> f64 {
         let mut e = self.w_descr * (c * &self.descr_a - &self.descr_b).norm_squared();
         e += self.w_lap * self.lap_mask.component_mul(&c.component_mul(c)).sum();
-        for (x, y) in &self.ops {
-            e += self.w_dcomm * (c * x - y * c).norm_squared();
+        for (w, (x, y)) in self.op_terms() {
+            e += w * (c * x - y * c).norm_squared();
         }
         e
     }
 
-    /// The gradient of [`FmapEnergy::value`] at `c`.
+    /// The values of the four terms at `c`, unweighted:
+    /// `[descr, lap, dcomm, orient]`.
+    pub fn terms(&self, c: &DMatrix<f64>) -> [f64; 4] {
+        let op_sum = |ops: &OperatorPairs| -> f64 {
+            ops.iter()
+                .map(|(x, y)| (c * x - y * c).norm_squared())
+                .sum()
+        };
+        [
+            (c * &self.descr_a - &self.descr_b).norm_squared(),
+            self.lap_mask.component_mul(&c.component_mul(c)).sum(),
+            op_sum(&self.ops),
+            op_sum(&self.orient_ops),
+        ]
+    }
+
+    /// The gradient of [`FmapEnergy::value`] at `c` (all entries, also the
+    /// first column when it is fixed).
     pub fn gradient(&self, c: &DMatrix<f64>) -> DMatrix<f64> {
         let mut g =
             2.0 * self.w_descr * (c * &self.descr_a - &self.descr_b) * self.descr_a.transpose();
         g += 2.0 * self.w_lap * self.lap_mask.component_mul(c);
-        for (x, y) in &self.ops {
+        for (w, (x, y)) in self.op_terms() {
             let r = c * x - y * c;
-            g += 2.0 * self.w_dcomm * (&r * x.transpose() - y.transpose() * &r);
+            g += 2.0 * w * (&r * x.transpose() - y.transpose() * &r);
         }
         g
     }
 
-    /// The exact minimizer of the energy. With `w_dcomm = 0` (or no
-    /// operators) each row is an independent k_A x k_A system; otherwise the
-    /// normal equations in vec(C) (size k_A·k_B) are assembled from
-    /// Kronecker products and solved by Cholesky.
+    /// The exact minimizer of the energy (k_B x k_A). Without operator
+    /// terms each row is an independent k_A x k_A system; otherwise the
+    /// normal equations in vec(C) (size k_A·k_B) are assembled with GEMMs
+    /// and solved by Cholesky.
     pub fn minimize(&self) -> Result<DMatrix<f64>> {
         let (ka, kb) = self.dims()?;
         let aat = &self.descr_a * self.descr_a.transpose();
         let bat = &self.descr_b * self.descr_a.transpose();
-        if self.w_dcomm == 0.0 || self.ops.is_empty() {
-            let mut c = DMatrix::zeros(kb, ka);
-            for i in 0..kb {
-                let mut h = self.w_descr * &aat;
-                for j in 0..ka {
-                    h[(j, j)] += self.w_lap * self.lap_mask[(i, j)];
-                }
-                let rhs = self.w_descr * bat.row(i).transpose();
-                let row = solve_spd(h, rhs)?;
-                c.row_mut(i).copy_from(&row.transpose());
-            }
-            return Ok(c);
+        let j0 = usize::from(self.fixed_first_column.is_some());
+        if j0 == 1 && ka == 0 {
+            return Err(Error::SizeMismatch {
+                what: "columns of C with a fixed first column",
+                found: 0,
+                expected: 1,
+            });
+        }
+        if self.op_terms().next().is_none() {
+            return self.minimize_rows(ka, kb, &aat, &bat);
         }
         // vec(C) is column-major: index (i, j) -> i + kb * j.
         let m = ka * kb;
-        let mut h = DMatrix::<f64>::zeros(m, m);
+        let mut h = Mat::<f64>::zeros(m, m);
         // w_descr (A Aᵀ ⊗ I) + w_lap diag(vec mask).
-        for j in 0..ka {
-            for l in 0..ka {
+        for l in 0..ka {
+            for j in 0..ka {
                 let v = self.w_descr * aat[(j, l)];
                 for i in 0..kb {
                     h[(i + kb * j, i + kb * l)] += v;
@@ -168,47 +252,146 @@ impl FmapEnergy {
                 h[(i + kb * j, i + kb * j)] += self.w_lap * self.lap_mask[(i, j)];
             }
         }
-        // w_dcomm Σ_q (Xᵀ ⊗ I − I ⊗ Y)ᵀ (Xᵀ ⊗ I − I ⊗ Y), entry by entry:
-        // row (i, j), column (r, l) gets
-        // δ_ir (X Xᵀ)_jl + δ_jl (YᵀY)_ir − X_jl Y_ir − X_lj Y_ri.
-        for (x, y) in &self.ops {
-            let xxt = x * x.transpose();
-            let yty = y.transpose() * y;
+        self.add_operator_hessian(&mut h, ka, kb);
+        let mut rhs: Vec<f64> = (0..m)
+            .map(|t| self.w_descr * bat[(t % kb, t / kb)])
+            .collect();
+        let free = j0 * kb;
+        if let Some(c0) = &self.fixed_first_column {
+            for t in free..m {
+                let s: f64 = (0..kb).map(|i| h[(t, i)] * c0[i]).sum();
+                rhs[t] -= s;
+            }
+        }
+        let x = solve_spd(
+            h.as_ref().submatrix(free, free, m - free, m - free),
+            &rhs[free..],
+        )?;
+        let mut c = DMatrix::zeros(kb, ka);
+        if let Some(c0) = &self.fixed_first_column {
+            c.column_mut(0).copy_from(c0);
+        }
+        c.as_mut_slice()[free..].copy_from_slice(&x);
+        Ok(c)
+    }
+
+    fn minimize_rows(
+        &self,
+        ka: usize,
+        kb: usize,
+        aat: &DMatrix<f64>,
+        bat: &DMatrix<f64>,
+    ) -> Result<DMatrix<f64>> {
+        let j0 = usize::from(self.fixed_first_column.is_some());
+        let nf = ka - j0;
+        let mut c = DMatrix::zeros(kb, ka);
+        for i in 0..kb {
+            let mut h = Mat::<f64>::from_fn(nf, nf, |r, s| self.w_descr * aat[(r + j0, s + j0)]);
+            for j in 0..nf {
+                h[(j, j)] += self.w_lap * self.lap_mask[(i, j + j0)];
+            }
+            let mut rhs: Vec<f64> = (0..nf).map(|j| self.w_descr * bat[(i, j + j0)]).collect();
+            if let Some(c0) = &self.fixed_first_column {
+                c[(i, 0)] = c0[i];
+                for (j, r) in rhs.iter_mut().enumerate() {
+                    *r -= self.w_descr * aat[(j + j0, 0)] * c0[i];
+                }
+            }
+            let row = solve_spd(h.as_ref(), &rhs)?;
+            for (j, v) in row.into_iter().enumerate() {
+                c[(i, j + j0)] = v;
+            }
+        }
+        Ok(c)
+    }
+
+    /// Adds `Σ_q w_q (Xᵀ ⊗ I − I ⊗ Y)ᵀ (Xᵀ ⊗ I − I ⊗ Y)` over all operator
+    /// terms: entry (row (i, j), column (r, l)) is
+    /// `δ_ir (X Xᵀ)_jl + δ_jl (YᵀY)_ir − X_jl Y_ir − X_lj Y_ri`.
+    fn add_operator_hessian(&self, h: &mut Mat<f64>, ka: usize, kb: usize) {
+        let terms: Vec<_> = self.op_terms().collect();
+        let p = terms.len();
+        // Stacked, weight-scaled copies: xs = [√w X_1 … √w X_p] (ka x ka·p),
+        // yts = [√w Y_1ᵀ … √w Y_pᵀ] (kb x kb·p), ys = [√w Y_1 … √w Y_p].
+        let mut xs = vec![0.0; ka * ka * p];
+        let mut ys = vec![0.0; kb * kb * p];
+        let mut yts = vec![0.0; kb * kb * p];
+        for (q, (w, (x, y))) in terms.iter().enumerate() {
+            let s = w.sqrt();
             for l in 0..ka {
-                for r in 0..kb {
-                    let col = r + kb * l;
-                    for j in 0..ka {
-                        let (xlj, xjl) = (x[(l, j)], x[(j, l)]);
-                        for i in 0..kb {
-                            let mut v = -xjl * y[(i, r)] - xlj * y[(r, i)];
-                            if i == r {
-                                v += xxt[(j, l)];
-                            }
-                            if j == l {
-                                v += yty[(i, r)];
-                            }
-                            h[(i + kb * j, col)] += self.w_dcomm * v;
+                for j in 0..ka {
+                    xs[q * ka * ka + l * ka + j] = s * x[(j, l)];
+                }
+            }
+            for r in 0..kb {
+                for i in 0..kb {
+                    ys[q * kb * kb + r * kb + i] = s * y[(i, r)];
+                    yts[q * kb * kb + i * kb + r] = s * y[(i, r)];
+                }
+            }
+        }
+        let xs_h = MatRef::from_column_major_slice(&xs, ka, ka * p);
+        let yts_h = MatRef::from_column_major_slice(&yts, kb, kb * p);
+        let par = Par::rayon(0);
+        let mut xxt = Mat::<f64>::zeros(ka, ka);
+        matmul(
+            xxt.as_mut(),
+            Accum::Replace,
+            xs_h,
+            xs_h.transpose(),
+            1.0,
+            par,
+        );
+        let mut yty = Mat::<f64>::zeros(kb, kb);
+        matmul(
+            yty.as_mut(),
+            Accum::Replace,
+            yts_h,
+            yts_h.transpose(),
+            1.0,
+            par,
+        );
+        // R[(j, l), (i, r)] = Σ_q w_q X_q[j, l] Y_q[i, r]: the stacked
+        // operators viewed as (ka² x p) and (kb² x p) column-major matrices.
+        let xv = MatRef::from_column_major_slice(&xs, ka * ka, p);
+        let yv = MatRef::from_column_major_slice(&ys, kb * kb, p);
+        let mut rr = Mat::<f64>::zeros(ka * ka, kb * kb);
+        matmul(rr.as_mut(), Accum::Replace, xv, yv.transpose(), 1.0, par);
+        for l in 0..ka {
+            for r in 0..kb {
+                let col = r + kb * l;
+                for j in 0..ka {
+                    let (jl, lj) = (j + ka * l, l + ka * j);
+                    let x_jl = xxt[(j, l)];
+                    for i in 0..kb {
+                        let mut v = -rr[(jl, i + kb * r)] - rr[(lj, r + kb * i)];
+                        if i == r {
+                            v += x_jl;
                         }
+                        if j == l {
+                            v += yty[(i, r)];
+                        }
+                        h[(i + kb * j, col)] += v;
                     }
                 }
             }
         }
-        let rhs = DVector::from_iterator(m, (0..m).map(|t| self.w_descr * bat[(t % kb, t / kb)]));
-        let x = solve_spd(h, rhs)?;
-        Ok(DMatrix::from_column_slice(kb, ka, x.as_slice()))
     }
 }
 
 /// Solves H x = b for symmetric positive definite H (faer Cholesky).
-fn solve_spd(h: DMatrix<f64>, b: DVector<f64>) -> Result<DVector<f64>> {
+fn solve_spd(h: MatRef<'_, f64>, b: &[f64]) -> Result<Vec<f64>> {
     let n = h.nrows();
-    let hm = faer::MatRef::from_column_major_slice(h.as_slice(), n, n);
-    let llt = hm
-        .llt(Side::Lower)
-        .map_err(|_| Error::NotPositiveDefinite)?;
-    let mut x = b.clone();
-    let xm = faer::MatMut::from_column_major_slice_mut(x.as_mut_slice(), n, 1);
+    if n == 0 {
+        return Ok(Vec::new());
+    }
+    let llt = h.llt(Side::Lower).map_err(|_| Error::NotPositiveDefinite)?;
+    let mut x = b.to_vec();
+    let xm = faer::MatMut::from_column_major_slice_mut(&mut x, n, 1);
     use faer::linalg::solvers::SolveCore;
     llt.solve_in_place_with_conj(faer::Conj::No, xm);
+    if x.iter().any(|v| !v.is_finite()) {
+        return Err(Error::NotPositiveDefinite);
+    }
     Ok(x)
 }

@@ -31,6 +31,11 @@ fn energy(ka: usize, kb: usize, p: usize, w_dcomm: f64) -> FmapEnergy {
         w_descr: 1.0,
         w_lap: 1e-2,
         w_dcomm,
+        orient_ops: (0..2)
+            .map(|q| (rnd_matrix(ka, ka, 30 + q), rnd_matrix(kb, kb, 40 + q)))
+            .collect(),
+        w_orient: 0.3 * w_dcomm,
+        fixed_first_column: None,
     }
 }
 
@@ -47,6 +52,9 @@ fn descriptor_term_alone_has_the_least_squares_solution() {
         w_descr: 1.0,
         w_lap: 0.0,
         w_dcomm: 0.0,
+        orient_ops: vec![],
+        w_orient: 0.0,
+        fixed_first_column: None,
     };
     let c = e.minimize().unwrap();
     let want = &b * a.try_inverse().unwrap();
@@ -106,6 +114,9 @@ fn self_map_is_the_identity() {
         w_descr: 1.0,
         w_lap: 1.0,
         w_dcomm: 1.0,
+        orient_ops: vec![],
+        w_orient: 0.0,
+        fixed_first_column: None,
     };
     let c = e.minimize().unwrap();
     assert!((c - DMatrix::identity(k, k)).amax() < 1e-9);
@@ -131,6 +142,9 @@ fn degenerate_energy_is_an_error() {
         w_descr: 1.0,
         w_lap: 0.0,
         w_dcomm: 0.0,
+        orient_ops: vec![],
+        w_orient: 0.0,
+        fixed_first_column: None,
     };
     assert_eq!(e.minimize().unwrap_err(), Error::NotPositiveDefinite);
     let mut bad = e.clone();
@@ -151,4 +165,66 @@ fn multiplication_operator_of_a_constant_is_its_value() {
     );
     let op = multiplication_operator(&phi, &mass, &[3.0; 4]);
     assert!((op - DMatrix::identity(2, 2) * 3.0).amax() < 1e-14);
+}
+
+#[test]
+fn fixed_first_column_is_kept_and_the_rest_is_optimal() {
+    for w in [0.0, 0.5] {
+        let mut e = energy(6, 5, 8, w);
+        let c0 = DVector::from_fn(5, |i, _| if i == 0 { 1.3 } else { 0.1 * i as f64 });
+        e.fixed_first_column = Some(c0.clone());
+        let c = e.minimize().unwrap();
+        assert_eq!(c.column(0), c0.column(0));
+        let g = e.gradient(&c);
+        // Stationary in the free columns only.
+        assert!(
+            g.columns(1, 5).amax() < 1e-9,
+            "w {w}: {}",
+            g.columns(1, 5).amax()
+        );
+        assert!(g.column(0).amax() > 1e-6);
+        let e0 = e.value(&c);
+        for s in 0..5 {
+            let mut d = rnd_matrix(5, 6, 200 + s) * 1e-3;
+            d.column_mut(0).fill(0.0);
+            assert!(e.value(&(&c + d)) > e0);
+        }
+    }
+}
+
+#[test]
+fn normalized_weights_do_not_depend_on_descriptor_scale() {
+    let base = energy(6, 5, 8, 1.0);
+    let solve = |s: f64| {
+        let mut e = base.clone();
+        e.descr_a *= s;
+        e.descr_b *= s;
+        for (x, y) in e.ops.iter_mut() {
+            *x *= s;
+            *y *= s;
+        }
+        for (x, y) in e.orient_ops.iter_mut() {
+            *x *= s;
+            *y *= s;
+        }
+        normalize_weights(&mut e, [0.1, 1e-3, 1.0, 1.0]);
+        e.minimize().unwrap()
+    };
+    let (c1, c7) = (solve(1.0), solve(7.0));
+    assert!((&c1 - &c7).amax() < 1e-9 * c1.amax());
+}
+
+#[test]
+fn effective_descriptor_count_closed_forms() {
+    // p copies of one descriptor: one independent descriptor.
+    let col = rnd_matrix(7, 1, 3);
+    let copies = DMatrix::from_fn(7, 5, |i, _| col[(i, 0)]);
+    assert!((effective_descriptor_count(&copies) - 1.0).abs() < 1e-12);
+    // p orthogonal descriptors of equal norm (below the constant row): p.
+    let ortho = DMatrix::from_fn(7, 4, |i, j| if i == j + 1 { 2.0 } else { 0.0 });
+    assert!((effective_descriptor_count(&ortho) - 4.0).abs() < 1e-12);
+    // The constant row is ignored.
+    let mut with_const = ortho.clone();
+    with_const.row_mut(0).fill(100.0);
+    assert!((effective_descriptor_count(&with_const) - 4.0).abs() < 1e-12);
 }
