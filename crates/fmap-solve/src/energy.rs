@@ -379,19 +379,39 @@ impl FmapEnergy {
     }
 }
 
-/// Solves H x = b for symmetric positive definite H (faer Cholesky).
+/// Solves H x = b for symmetric positive semidefinite H (faer Cholesky).
+///
+/// Symmetric shapes (repeated eigenvalues with descriptors invariant
+/// under the symmetry) make the energy flat along some directions: every
+/// point of that flat set is an exact minimum. A ridge of 1e-13 of the
+/// largest diagonal entry picks one (the nearly minimum-norm one) at no
+/// measurable cost in energy; if the factorization still fails the ridge
+/// grows by 100x, up to 1e-5. An all-zero H is an error.
 fn solve_spd(h: MatRef<'_, f64>, b: &[f64]) -> Result<Vec<f64>> {
     let n = h.nrows();
     if n == 0 {
         return Ok(Vec::new());
     }
-    let llt = h.llt(Side::Lower).map_err(|_| Error::NotPositiveDefinite)?;
-    let mut x = b.to_vec();
-    let xm = faer::MatMut::from_column_major_slice_mut(&mut x, n, 1);
-    use faer::linalg::solvers::SolveCore;
-    llt.solve_in_place_with_conj(faer::Conj::No, xm);
-    if x.iter().any(|v| !v.is_finite()) {
+    let max_diag = (0..n).fold(0.0f64, |m, i| m.max(h[(i, i)]));
+    if !(max_diag > 0.0 && max_diag.is_finite()) {
         return Err(Error::NotPositiveDefinite);
     }
-    Ok(x)
+    use faer::linalg::solvers::SolveCore;
+    let mut ridge = 1e-13;
+    while ridge <= 1e-5 {
+        let mut hr = h.to_owned();
+        for i in 0..n {
+            hr[(i, i)] += ridge * max_diag;
+        }
+        if let Ok(llt) = hr.llt(Side::Lower) {
+            let mut x = b.to_vec();
+            let xm = faer::MatMut::from_column_major_slice_mut(&mut x, n, 1);
+            llt.solve_in_place_with_conj(faer::Conj::No, xm);
+            if x.iter().all(|v| v.is_finite()) {
+                return Ok(x);
+            }
+        }
+        ridge *= 100.0;
+    }
+    Err(Error::NotPositiveDefinite)
 }

@@ -9,9 +9,12 @@
 //! | [`eigensolve`] | `fmaps-eigensolve` | `EigenSolver` trait, native/ARPACK/dense backends, `SpectralBasis` |
 //! | [`geodesic`] | `fmaps-geodesic` | exact polyhedral geodesics, Dijkstra |
 //! | [`eval`] | `fmaps-eval` | benchmark protocol: geodesic errors, curves, dataset loader |
+//! | [`descriptors`] | `fmaps-descriptors` | HKS, WKS, landmark descriptors |
+//! | [`solve`] | `fmaps-solve` | functional-map energy and exact solve, map conversions |
 //!
 //! and provides [`spectrum`], the mesh-to-eigenbasis stage with per-stage
-//! timings, plus [`npy`] for handing results to Python.
+//! timings, [`pipeline`] ([`match_shapes`]: two meshes to a point map), plus
+//! [`npy`] for handing results to Python.
 //!
 //! ```
 //! use fmaps::{spectrum, SpectrumParams};
@@ -28,14 +31,18 @@
 #![deny(missing_docs)]
 
 pub mod npy;
+pub mod pipeline;
 
 use std::time::Instant;
 
+pub use fmaps_descriptors as descriptors;
 pub use fmaps_eigensolve as eigensolve;
 pub use fmaps_eval as eval;
 pub use fmaps_geodesic as geodesic;
 pub use fmaps_laplacian as laplacian;
 pub use fmaps_mesh_io as mesh_io;
+pub use fmaps_solve as solve;
+pub use pipeline::{MatchParams, MatchResult, match_shapes};
 
 use eigensolve::{EigenProblem, EigenSolver, NativeParams, NativeSolver, SpectralBasis};
 use laplacian::{LaplacianParams, MassKind};

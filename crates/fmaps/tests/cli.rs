@@ -252,3 +252,61 @@ fn eval_of_an_identity_and_a_shifted_map() {
     assert!(String::from_utf8(out.stderr).unwrap().contains("3 lines"));
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+#[test]
+fn match_writes_a_one_based_map_and_reports_stages() {
+    let dir = tmpdir("match");
+    // A torus matched to itself: every map entry is a valid 1-based index.
+    let m = fmaps::mesh_io::generate::torus(2.0, 0.8, 24, 12);
+    let mesh = dir.join("t.off");
+    fmaps::mesh_io::write_mesh(&mesh, &m).unwrap();
+    let map = dir.join("t_t.map");
+    let fmap = dir.join("C.txt");
+    let s = |p: &PathBuf| p.to_str().unwrap().to_string();
+    let out = fmaps()
+        .args(["match", &s(&mesh), &s(&mesh), "--out", &s(&map)])
+        .args(["--k", "12", "--k-process", "30", "--n-descr", "30"])
+        .args(["--save-fmap", &s(&fmap), "--json"])
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    for stage in [
+        "spectra",
+        "descriptors",
+        "operators",
+        "solve",
+        "point_map",
+        "total",
+    ] {
+        assert!(v["seconds"][stage].as_f64().unwrap() >= 0.0, "{stage}");
+    }
+    assert!((0.0..=1.0).contains(&v["sparsity"].as_f64().unwrap()));
+    let t = fmaps::mesh_io::read_map(&map).unwrap();
+    assert_eq!(t.len(), m.n_vertices());
+    assert!(t.iter().all(|&x| x < m.n_vertices()));
+    let text = std::fs::read_to_string(&fmap).unwrap();
+    assert_eq!(text.lines().count(), 12);
+    assert!(text.lines().all(|l| l.split_whitespace().count() == 12));
+
+    // Bad landmark file: exit code 2 naming the file and line.
+    let lm = dir.join("lm.txt");
+    std::fs::write(&lm, "1 2\n0 5\n").unwrap();
+    let out = fmaps()
+        .args(["match", &s(&mesh), &s(&mesh), "--landmarks", &s(&lm)])
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("lm.txt:2"), "{err}");
+    // k larger than the computed basis: bad usage, exit 2.
+    let out = fmaps()
+        .args(["match", &s(&mesh), &s(&mesh), "--k", "300"])
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+}

@@ -1,0 +1,422 @@
+//! The basic functional-map pipeline: two meshes in, a point map out.
+//!
+//! For shapes A (source) and B (target) it computes
+//!
+//! 1. the Laplace–Beltrami eigenbases of both ([`crate::spectrum`]),
+//! 2. spectral descriptors (WKS or HKS from the first `k_descr` eigenpairs,
+//!    optionally landmark descriptors), every column normalized to unit
+//!    L² norm,
+//! 3. the functional map `C_BA` (k x k, functions on B to functions on A)
+//!    minimizing the energy of [`fmaps_solve::FmapEnergy`]: descriptor
+//!    preservation, Laplacian commutativity (resolvent mask), descriptor
+//!    commutativity and orientation preservation, with the first column
+//!    fixed (constants to constants), solved exactly,
+//! 4. the point map `T_AB` (a vertex of B for every vertex of A) by exact
+//!    nearest neighbours in the spectral embedding.
+//!
+//! The direction follows the dataset convention: the map file `A_B.map`
+//! lists a B vertex per A vertex, and `T_AB` is read off `C_BA` (pull-back
+//! of B's functions).
+//!
+//! [`MatchParams::default`] is the setting of the literature's standard
+//! automatic pipeline, as pyFM ships it: k = 200 eigenpairs computed, 100
+//! WKS descriptors from 128 eigenpairs, a 50 x 50 map, weights
+//! `w_descr = 0.1, w_lap = 1e-3, w_dcomm = 1` with the resolvent mask
+//! (γ = 0.5) and pyFM's term normalization, and the orientation term on
+//! (`w_orient = 1`; without it, maps of left-right symmetric shapes flip).
+
+use std::time::Instant;
+
+use fmaps_descriptors as descriptors;
+use fmaps_eigensolve::SpectralBasis;
+use fmaps_mesh_io::TriMesh;
+use fmaps_solve as solve;
+use nalgebra::{DMatrix, DVector};
+
+use crate::{SpectrumParams, spectrum};
+
+/// Errors of the pipeline, naming the stage.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum MatchError {
+    /// The eigensolver failed.
+    #[error("eigenbasis of the {shape} shape: {source}")]
+    Spectrum {
+        /// "source" or "target".
+        shape: &'static str,
+        /// The cause.
+        source: fmaps_eigensolve::Error,
+    },
+    /// Descriptors could not be computed.
+    #[error("descriptors: {0}")]
+    Descriptors(#[from] descriptors::Error),
+    /// The solve or the conversion failed.
+    #[error("functional map: {0}")]
+    Solve(#[from] solve::Error),
+    /// A parameter is out of range.
+    #[error("invalid parameter: {0}")]
+    InvalidParameter(String),
+}
+
+/// The descriptor family.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum DescriptorKind {
+    /// Wave kernel signature (Aubry et al. 2011).
+    #[default]
+    Wks,
+    /// Heat kernel signature (Sun et al. 2009).
+    Hks,
+}
+
+impl std::str::FromStr for DescriptorKind {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "wks" => Ok(Self::Wks),
+            "hks" => Ok(Self::Hks),
+            _ => Err(format!("unknown descriptor '{s}' (wks, hks)")),
+        }
+    }
+}
+
+/// Options of the pipeline (see the module docs for the defaults).
+#[derive(Debug, Clone)]
+pub struct MatchParams {
+    /// Eigenpairs computed per shape.
+    pub k_process: usize,
+    /// Eigenpairs the descriptors are built from.
+    pub k_descr: usize,
+    /// Descriptor samples (energies or times) per family.
+    pub n_descr: usize,
+    /// Descriptor family.
+    pub descriptor: DescriptorKind,
+    /// Keep every `subsample`-th descriptor column (1 = all).
+    pub subsample: usize,
+    /// Size of the functional map (k x k).
+    pub k: usize,
+    /// Relative weight of descriptor preservation.
+    pub w_descr: f64,
+    /// Relative weight of Laplacian commutativity.
+    pub w_lap: f64,
+    /// Relative weight of descriptor commutativity.
+    pub w_dcomm: f64,
+    /// Relative weight of orientation preservation (0 = off).
+    pub w_orient: f64,
+    /// Look for orientation-reversing maps instead.
+    pub orient_reversing: bool,
+    /// Resolvent Laplacian mask with this γ; `None`: plain `(λ − μ)²`.
+    pub resolvent_gamma: Option<f64>,
+    /// Landmark pairs (source vertex, target vertex), 0-based: adds
+    /// landmark descriptors.
+    pub landmarks: Vec<(usize, usize)>,
+    /// Convert with the adjoint (`T_AB(x) = argmin_y ‖Φ_B(y) − C_BAᵀ Φ_A(x)‖`).
+    pub adjoint: bool,
+    /// Eigensolver options.
+    pub spectrum: SpectrumParams,
+}
+
+impl Default for MatchParams {
+    fn default() -> Self {
+        Self {
+            k_process: 200,
+            k_descr: 128,
+            n_descr: 100,
+            descriptor: DescriptorKind::Wks,
+            subsample: 1,
+            k: 50,
+            w_descr: 0.1,
+            w_lap: 1e-3,
+            w_dcomm: 1.0,
+            w_orient: 1.0,
+            orient_reversing: false,
+            resolvent_gamma: Some(0.5),
+            landmarks: Vec::new(),
+            adjoint: false,
+            spectrum: SpectrumParams::default(),
+        }
+    }
+}
+
+impl MatchParams {
+    fn check(&self) -> Result<(), MatchError> {
+        let bad = |m: String| Err(MatchError::InvalidParameter(m));
+        if self.k == 0 || self.k > self.k_process {
+            return bad(format!(
+                "the map size k = {} must be in 1..=k_process ({})",
+                self.k, self.k_process
+            ));
+        }
+        if self.k_descr < 2 || self.k_descr > self.k_process {
+            return bad(format!(
+                "k_descr = {} must be in 2..=k_process ({})",
+                self.k_descr, self.k_process
+            ));
+        }
+        if self.n_descr == 0 || self.subsample == 0 {
+            return bad("n_descr and subsample must be positive".into());
+        }
+        let w = [self.w_descr, self.w_lap, self.w_dcomm, self.w_orient];
+        if w.iter().any(|x| !x.is_finite() || *x < 0.0) || w.iter().sum::<f64>() <= 0.0 {
+            return bad(format!(
+                "weights must be >= 0 with a positive sum, got {w:?}"
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// One shape after the per-shape stages: reusable across pairs.
+#[derive(Debug, Clone)]
+pub struct PreparedShape {
+    /// Oriented triangles (for the orientation operators).
+    pub faces: Vec<[usize; 3]>,
+    /// The eigenbasis (`k_process` pairs).
+    pub basis: SpectralBasis,
+    /// Total area (sum of the lumped mass).
+    pub area: f64,
+    /// Seconds for the Laplacian and the eigenbasis.
+    pub seconds: f64,
+}
+
+/// Laplacian and eigenbasis of one shape.
+pub fn prepare(mesh: &TriMesh, params: &MatchParams) -> Result<PreparedShape, MatchError> {
+    params.check()?;
+    let t = Instant::now();
+    let out = spectrum(mesh, params.k_process, &params.spectrum).map_err(|source| {
+        MatchError::Spectrum {
+            shape: "input",
+            source,
+        }
+    })?;
+    let area = out.basis.mass.iter().sum();
+    Ok(PreparedShape {
+        faces: mesh.faces().to_vec(),
+        basis: out.basis,
+        area,
+        seconds: t.elapsed().as_secs_f64(),
+    })
+}
+
+/// Seconds per stage of [`match_prepared`].
+#[derive(Debug, Clone, Copy, Default, serde::Serialize)]
+pub struct MatchTimes {
+    /// Laplacians and eigenbases of both shapes (0 when prepared earlier).
+    pub spectra: f64,
+    /// Descriptors, their projection and normalization.
+    pub descriptors: f64,
+    /// Multiplication and orientation operators.
+    pub operators: f64,
+    /// Weights, assembly and exact solve of the energy.
+    pub solve: f64,
+    /// Conversion to the point map.
+    pub point_map: f64,
+    /// Sum of all stages.
+    pub total: f64,
+}
+
+/// The result of the pipeline.
+#[derive(Debug, Clone)]
+pub struct MatchResult {
+    /// `T_AB`: for every source vertex, a target vertex (0-based).
+    pub t_ab: Vec<usize>,
+    /// `C_BA` (k x k): coefficients on B to coefficients on A.
+    pub c_ba: DMatrix<f64>,
+    /// Structural measures of `C_BA`.
+    pub metrics: solve::FmapMetrics,
+    /// Energy terms at the solution, unweighted `[descr, lap, dcomm, orient]`.
+    pub energy_terms: [f64; 4],
+    /// The weighted energy at the solution.
+    pub energy: f64,
+    /// Timings.
+    pub times: MatchTimes,
+}
+
+/// Runs the whole pipeline from source `a` to target `b`.
+pub fn match_shapes(
+    a: &TriMesh,
+    b: &TriMesh,
+    params: &MatchParams,
+) -> Result<MatchResult, MatchError> {
+    params.check()?;
+    let mut single = params.clone();
+    single.spectrum.threads = 1;
+    // The two shapes side by side, one thread each.
+    let t = Instant::now();
+    let (pa, pb) = rayon::join(|| prepare(a, &single), || prepare(b, &single));
+    let spectra = t.elapsed().as_secs_f64();
+    let name = |shape, e| match e {
+        MatchError::Spectrum { source, .. } => MatchError::Spectrum { shape, source },
+        e => e,
+    };
+    let pa = pa.map_err(|e| name("source", e))?;
+    let pb = pb.map_err(|e| name("target", e))?;
+    let mut out = match_prepared(&pa, &pb, params)?;
+    out.times.spectra = spectra;
+    out.times.total += spectra;
+    Ok(out)
+}
+
+/// The descriptors (n x p, unit L² columns) of a prepared shape.
+pub fn shape_descriptors(
+    shape: &PreparedShape,
+    landmarks: &[usize],
+    params: &MatchParams,
+) -> Result<DMatrix<f64>, MatchError> {
+    let basis = shape.basis.truncate(params.k_descr);
+    let (ev, phi) = (&basis.eigenvalues, &basis.eigenvectors);
+    let mut parts = Vec::new();
+    match params.descriptor {
+        DescriptorKind::Wks => {
+            let p = descriptors::WksParams {
+                n_energies: params.n_descr,
+                ..Default::default()
+            };
+            parts.push(descriptors::wks(ev, phi, &p)?);
+            if !landmarks.is_empty() {
+                parts.push(descriptors::landmark_wks(ev, phi, landmarks, &p)?);
+            }
+        }
+        DescriptorKind::Hks => {
+            let p = descriptors::HksParams {
+                n_times: params.n_descr,
+                ..Default::default()
+            };
+            parts.push(descriptors::hks(ev, phi, &p)?);
+            if !landmarks.is_empty() {
+                parts.push(descriptors::landmark_hks(ev, phi, landmarks, &p)?);
+            }
+        }
+    }
+    let n = phi.nrows();
+    let total: usize = parts.iter().map(|d| d.ncols()).sum();
+    let keep: Vec<usize> = (0..total).step_by(params.subsample).collect();
+    let all: Vec<&DMatrix<f64>> = parts.iter().collect();
+    let column = |j: usize| -> (usize, usize) {
+        let mut j = j;
+        for (i, d) in all.iter().enumerate() {
+            if j < d.ncols() {
+                return (i, j);
+            }
+            j -= d.ncols();
+        }
+        unreachable!("column index below the total")
+    };
+    let mut d = DMatrix::from_fn(n, keep.len(), |v, c| {
+        let (i, j) = column(keep[c]);
+        all[i][(v, j)]
+    });
+    descriptors::normalize_columns(&mut d, &shape.basis.mass);
+    Ok(d)
+}
+
+/// The pipeline on two prepared shapes (source `a`, target `b`).
+pub fn match_prepared(
+    a: &PreparedShape,
+    b: &PreparedShape,
+    params: &MatchParams,
+) -> Result<MatchResult, MatchError> {
+    params.check()?;
+    let k = params.k;
+    for (shape, s) in [("source", a), ("target", b)] {
+        if s.basis.k() < params.k_process.max(k) {
+            return Err(MatchError::InvalidParameter(format!(
+                "the {shape} shape was prepared with {} eigenpairs, fewer than k_process = {}",
+                s.basis.k(),
+                params.k_process
+            )));
+        }
+    }
+    for &(x, y) in &params.landmarks {
+        if x >= a.basis.n() || y >= b.basis.n() {
+            return Err(MatchError::InvalidParameter(format!(
+                "landmark ({x}, {y}) is outside the shapes ({} and {} vertices)",
+                a.basis.n(),
+                b.basis.n()
+            )));
+        }
+    }
+    let mut times = MatchTimes::default();
+    let t = Instant::now();
+    let lm_a: Vec<usize> = params.landmarks.iter().map(|p| p.0).collect();
+    let lm_b: Vec<usize> = params.landmarks.iter().map(|p| p.1).collect();
+    let (da, db) = rayon::join(
+        || shape_descriptors(a, &lm_a, params),
+        || shape_descriptors(b, &lm_b, params),
+    );
+    let (da, db) = (da?, db?);
+    // The map solved for is C_BA: source of C is B, target A.
+    let (sb, sa) = (b.basis.truncate(k), a.basis.truncate(k));
+    let descr_b = sb.project(&db);
+    let descr_a = sa.project(&da);
+    times.descriptors = t.elapsed().as_secs_f64();
+
+    let t = Instant::now();
+    let mut energy = solve::FmapEnergy::new(
+        descr_b,
+        descr_a,
+        match params.resolvent_gamma {
+            Some(g) => solve::resolvent_mask(&sb.eigenvalues, &sa.eigenvalues, g),
+            None => solve::laplacian_mask(&sb.eigenvalues, &sa.eigenvalues),
+        },
+    );
+    if params.w_dcomm > 0.0 {
+        let (xb, xa) = rayon::join(
+            || solve::multiplication_operators(&sb.eigenvectors, &sb.mass, &db),
+            || solve::multiplication_operators(&sa.eigenvectors, &sa.mass, &da),
+        );
+        energy.ops = xb?.into_iter().zip(xa?).collect();
+    }
+    if params.w_orient > 0.0 {
+        let (ob, oa) = rayon::join(
+            || solve::orientation_operators(&b.faces, &sb.eigenvectors, &db, false),
+            || {
+                solve::orientation_operators(
+                    &a.faces,
+                    &sa.eigenvectors,
+                    &da,
+                    params.orient_reversing,
+                )
+            },
+        );
+        energy.orient_ops = ob?.into_iter().zip(oa?).collect();
+    }
+    times.operators = t.elapsed().as_secs_f64();
+
+    let t = Instant::now();
+    // Constants map to constants: φ_0 = ±1/sqrt(area) on both shapes.
+    let sign = (sb.eigenvectors[(0, 0)] * sa.eigenvectors[(0, 0)]).signum();
+    let mut c0 = DVector::zeros(k);
+    c0[0] = sign * (a.area / b.area).sqrt();
+    energy.fixed_first_column = Some(c0);
+    solve::normalize_weights(
+        &mut energy,
+        [
+            params.w_descr,
+            params.w_lap,
+            params.w_dcomm,
+            params.w_orient,
+        ],
+    );
+    let c_ba = energy.minimize()?;
+    let energy_value = energy.value(&c_ba);
+    let energy_terms = energy.terms(&c_ba);
+    times.solve = t.elapsed().as_secs_f64();
+
+    let t = Instant::now();
+    let t_ab = if params.adjoint {
+        solve::point_map_from_fmap_adjoint(&c_ba, &sb, &sa)?
+    } else {
+        solve::point_map_from_fmap(&c_ba, &sb, &sa)?
+    };
+    times.point_map = t.elapsed().as_secs_f64();
+    times.total = times.descriptors + times.operators + times.solve + times.point_map;
+    let metrics = solve::fmap_metrics(&c_ba, &sb.eigenvalues, &sa.eigenvalues)?;
+    Ok(MatchResult {
+        t_ab,
+        c_ba,
+        metrics,
+        energy_terms,
+        energy: energy_value,
+        times,
+    })
+}
