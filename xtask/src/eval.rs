@@ -34,6 +34,128 @@ pub struct Args {
     /// Geodesic method: exact or dijkstra.
     #[arg(long, default_value = "exact")]
     geodesic: String,
+    /// Where `pyfm:<stage>` methods are read from: `<DIR>/pyfm-<collection>/`
+    /// as written by `../shared/peers/pyfm_pipeline.py --out`.
+    #[arg(long, default_value = "target/peers")]
+    peer_dir: PathBuf,
+    /// Threads for the fmaps pipeline (0 = all cores).
+    #[arg(long, default_value_t = 0)]
+    threads: usize,
+}
+
+/// Where the maps of a method come from.
+enum MapSource {
+    /// A method of the dataset's `maps/*.zip`.
+    Published(fmaps::eval::PublishedMaps),
+    /// `fmaps-init`: the fmaps pipeline, run here.
+    Pipeline(Box<PipelineCache>),
+    /// pyFM's maps from `pyfm_pipeline.py` with its per-pair timings.
+    PyFm {
+        dir: PathBuf,
+        seconds: HashMap<(String, String), f64>,
+    },
+}
+
+/// Prepared shapes (eigenbases) reused across pairs, like the peer does.
+struct PipelineCache {
+    params: fmaps::MatchParams,
+    shapes: HashMap<String, fmaps::pipeline::PreparedShape>,
+}
+
+impl MapSource {
+    fn open(c: &Collection, method: &str, peer_dir: &std::path::Path) -> anyhow::Result<MapSource> {
+        if method == "fmaps-init" {
+            return Ok(MapSource::Pipeline(Box::new(PipelineCache {
+                params: fmaps::MatchParams::default(),
+                shapes: HashMap::new(),
+            })));
+        }
+        if let Some(stage) = method.strip_prefix("pyfm:") {
+            let base = root().join(peer_dir).join(format!("pyfm-{}", c.name()));
+            let dir = base.join("maps").join(stage);
+            if !dir.is_dir() {
+                bail!(
+                    "{} not found: run ../shared/peers/pyfm_pipeline.py <dataset> --out {} --orient-weight 1 first",
+                    dir.display(),
+                    base.display()
+                );
+            }
+            let seconds = pyfm_seconds(&base.join("timings.jsonl"), stage)?;
+            return Ok(MapSource::PyFm { dir, seconds });
+        }
+        Ok(MapSource::Published(c.published_maps(method)?))
+    }
+
+    /// The map A -> B and the seconds it took to compute (when known).
+    fn map(
+        &mut self,
+        c: &Collection,
+        meshes: &HashMap<String, TriMesh>,
+        a: &str,
+        b: &str,
+    ) -> anyhow::Result<Option<(Vec<usize>, Option<f64>)>> {
+        match self {
+            MapSource::Published(m) => Ok(m.read(a, b)?.map(|t| (t, None))),
+            MapSource::PyFm { dir, seconds } => {
+                let path = dir.join(format!("{a}_{b}.map"));
+                if !path.exists() {
+                    return Ok(None);
+                }
+                let t = fmaps::mesh_io::read_map(&path)?;
+                Ok(Some((t, seconds.get(&(a.into(), b.into())).copied())))
+            }
+            MapSource::Pipeline(cache) => {
+                let t = Instant::now();
+                for s in [a, b] {
+                    if !cache.shapes.contains_key(s) {
+                        let p = fmaps::pipeline::prepare(&meshes[s], &cache.params)
+                            .with_context(|| format!("{} {s}", c.name()))?;
+                        cache.shapes.insert(s.to_string(), p);
+                    }
+                }
+                let r = fmaps::pipeline::match_prepared(
+                    &cache.shapes[a],
+                    &cache.shapes[b],
+                    &cache.params,
+                )
+                .with_context(|| format!("{} {a} -> {b}", c.name()))?;
+                Ok(Some((r.t_ab, Some(t.elapsed().as_secs_f64()))))
+            }
+        }
+    }
+}
+
+/// Per-pair seconds of one pyFM stage's map, counted like ours: loading,
+/// Laplacians and eigenbases (0 for shapes cached from earlier pairs),
+/// descriptors, the fit and the conversion.
+fn pyfm_seconds(
+    path: &std::path::Path,
+    stage: &str,
+) -> anyhow::Result<HashMap<(String, String), f64>> {
+    let mut out = HashMap::new();
+    let Ok(text) = std::fs::read_to_string(path) else {
+        return Ok(out);
+    };
+    let keys: &[&str] = match stage {
+        "fm" => &["fit", "p2p"],
+        "fm_orient" => &["fit_orient", "p2p_orient"],
+        _ => return Ok(out),
+    };
+    for line in text.lines() {
+        let v: serde_json::Value = serde_json::from_str(line)?;
+        let t = &v["times"];
+        let base: f64 = ["load", "setup", "laplacian", "eig", "descr"]
+            .iter()
+            .chain(keys)
+            .filter_map(|k| t[*k].as_f64())
+            .sum();
+        let pair = (
+            v["pair"][0].as_str().unwrap_or("").to_string(),
+            v["pair"][1].as_str().unwrap_or("").to_string(),
+        );
+        out.insert(pair, base);
+    }
+    Ok(out)
 }
 
 pub fn eval(args: &Args) -> anyhow::Result<()> {
@@ -52,6 +174,9 @@ pub fn eval(args: &Args) -> anyhow::Result<()> {
     let out_dir = root().join("target/eval");
     std::fs::create_dir_all(&out_dir)?;
     let params = EvalParams::default();
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(args.threads)
+        .build()?;
     let mut rows = Vec::new();
     for cname in &collections {
         let c = Collection::open(&bcicp, cname)?;
@@ -66,9 +191,9 @@ pub fn eval(args: &Args) -> anyhow::Result<()> {
         };
         let mut meshes: HashMap<String, TriMesh> = HashMap::new();
         for method in &methods {
-            let maps = c
-                .published_maps(method)
+            let mut maps = MapSource::open(&c, method, &args.peer_dir)
                 .with_context(|| format!("method {method} of {cname}"))?;
+            let mut map_seconds = Vec::new();
             let bar = ProgressBar::new(pairs.len() as u64).with_style(
                 ProgressStyle::with_template(
                     "{msg:32} [{bar:30}] {pos}/{len} {elapsed_precise} eta {eta}",
@@ -83,15 +208,16 @@ pub fn eval(args: &Args) -> anyhow::Result<()> {
             let t0 = Instant::now();
             for (a, b) in &pairs {
                 bar.inc(1);
-                let Some(t_ab) = maps.read(a, b)? else {
-                    missing += 1;
-                    continue;
-                };
                 for s in [a, b] {
                     if !meshes.contains_key(s) {
                         meshes.insert(s.clone(), c.read_mesh(s)?);
                     }
                 }
+                let Some((t_ab, secs)) = pool.install(|| maps.map(&c, &meshes, a, b))? else {
+                    missing += 1;
+                    continue;
+                };
+                map_seconds.extend(secs);
                 let (ma, mb) = (&meshes[a], &meshes[b]);
                 if t_ab.len() != ma.n_vertices() {
                     bail!(
@@ -114,7 +240,7 @@ pub fn eval(args: &Args) -> anyhow::Result<()> {
                     .for_each(|(s, c)| *s += c);
                 per_pair.push(json!({
                     "source": a, "target": b, "mean_error": r.mean_error, "sym_mean_error": r.sym_mean_error,
-                    "auc": r.auc, "coverage": r.coverage, "seconds": r.seconds,
+                    "auc": r.auc, "coverage": r.coverage, "seconds": r.seconds, "map_seconds": secs,
                 }));
             }
             bar.finish_and_clear();
@@ -127,6 +253,9 @@ pub fn eval(args: &Args) -> anyhow::Result<()> {
                 "geodesic": geodesic_name,
                 "mean_error": avg("mean_error"), "sym_mean_error": avg("sym_mean_error"), "auc": auc,
                 "coverage": avg("coverage"), "seconds_per_pair": t0.elapsed().as_secs_f64() / n,
+                "map_seconds_per_pair": if map_seconds.is_empty() { serde_json::Value::Null } else {
+                    json!(map_seconds.iter().sum::<f64>() / map_seconds.len() as f64) },
+                "threads": if matches!(maps, MapSource::Pipeline(_)) { json!(pool.current_num_threads()) } else { serde_json::Value::Null },
                 "thresholds": thresholds(&params), "curve": curve, "per_pair": per_pair,
             });
             let path = out_dir.join(format!("{cname}-{method}.json"));
@@ -135,12 +264,20 @@ pub fn eval(args: &Args) -> anyhow::Result<()> {
         }
     }
     println!(
-        "{:<16} {:<16} {:>6} {:>10} {:>10} {:>7} {:>9} {:>8}  geodesics",
-        "collection", "method", "pairs", "mean x100", "sym x100", "AUC", "coverage", "s/pair"
+        "{:<16} {:<16} {:>6} {:>10} {:>10} {:>7} {:>9} {:>9} {:>8}  geodesics",
+        "collection",
+        "method",
+        "pairs",
+        "mean x100",
+        "sym x100",
+        "AUC",
+        "coverage",
+        "map s",
+        "eval s"
     );
     for r in &rows {
         println!(
-            "{:<16} {:<16} {:>6} {:>10.3} {:>10.3} {:>7.4} {:>9.4} {:>8.2}  {}",
+            "{:<16} {:<16} {:>6} {:>10.3} {:>10.3} {:>7.4} {:>9.4} {:>9} {:>8.2}  {}",
             r["collection"].as_str().unwrap_or(""),
             r["method"].as_str().unwrap_or(""),
             format!(
@@ -156,13 +293,30 @@ pub fn eval(args: &Args) -> anyhow::Result<()> {
             100.0 * r["sym_mean_error"].as_f64().unwrap_or(f64::NAN),
             r["auc"].as_f64().unwrap_or(f64::NAN),
             r["coverage"].as_f64().unwrap_or(f64::NAN),
+            r["map_seconds_per_pair"]
+                .as_f64()
+                .map_or("-".to_string(), |v| format!("{v:.3}")),
             r["seconds_per_pair"].as_f64().unwrap_or(f64::NAN),
             r["geodesic"].as_str().unwrap_or(""),
         );
     }
     println!(
-        "(* some pairs had no map; errors are d/sqrt(area) x100, AUC of the mean cumulative curve on [0, 0.25])"
+        "(* some pairs had no map; errors are d/sqrt(area) x100, AUC of the mean cumulative curve on [0, 0.25];\n \
+         map s: seconds per pair to compute the map (shapes prepared once per run, as pyfm_pipeline.py does); eval s: evaluation)"
     );
+    for cname in &collections {
+        let time = |m: &str| {
+            rows.iter()
+                .find(|r| r["collection"] == cname.as_str() && r["method"] == m)
+                .and_then(|r| r["map_seconds_per_pair"].as_f64())
+        };
+        if let (Some(ours), Some(peer)) = (time("fmaps-init"), time("pyfm:fm_orient")) {
+            println!(
+                "{cname}: fmaps-init computes a map {:.1}x faster than pyFM's same pipeline ({ours:.3} s vs {peer:.3} s per pair)",
+                peer / ours
+            );
+        }
+    }
     for cname in &collections {
         let series: Vec<crate::plot::Series> = rows
             .iter()

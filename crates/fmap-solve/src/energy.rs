@@ -355,16 +355,19 @@ impl FmapEnergy {
         // operators viewed as (ka² x p) and (kb² x p) column-major matrices.
         let xv = MatRef::from_column_major_slice(&xs, ka * ka, p);
         let yv = MatRef::from_column_major_slice(&ys, kb * kb, p);
-        let mut rr = Mat::<f64>::zeros(ka * ka, kb * kb);
-        matmul(rr.as_mut(), Accum::Replace, xv, yv.transpose(), 1.0, par);
+        // Stored transposed, rt[(i, r), (j, l)], so the loops below read
+        // along columns.
+        let mut rt = Mat::<f64>::zeros(kb * kb, ka * ka);
+        matmul(rt.as_mut(), Accum::Replace, yv, xv.transpose(), 1.0, par);
         for l in 0..ka {
             for r in 0..kb {
                 let col = r + kb * l;
                 for j in 0..ka {
                     let (jl, lj) = (j + ka * l, l + ka * j);
                     let x_jl = xxt[(j, l)];
+                    let (c_jl, c_lj) = (rt.col_as_slice(jl), rt.col_as_slice(lj));
                     for i in 0..kb {
-                        let mut v = -rr[(jl, i + kb * r)] - rr[(lj, r + kb * i)];
+                        let mut v = -c_jl[i + kb * r] - c_lj[r + kb * i];
                         if i == r {
                             v += x_jl;
                         }

@@ -43,7 +43,9 @@ pub use energy::{
 };
 pub use nn::nearest_rows;
 pub use operators::{multiplication_operators, orientation_operators};
-pub use weights::{effective_descriptor_count, normalize_weights, term_scales};
+pub use weights::{
+    compress_descriptors, effective_descriptor_count, normalize_weights, term_scales,
+};
 
 /// Errors of this crate.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]

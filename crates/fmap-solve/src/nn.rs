@@ -43,13 +43,14 @@ pub fn nearest_rows(data: &DMatrix<f64>, queries: &DMatrix<f64>) -> Vec<usize> {
         .flat_map_iter(|&q0| {
             let rows = BLOCK.min(nq - q0);
             let q = Mat::<f64>::from_fn(rows, d, |i, j| queries[(q0 + i, j)]);
-            // S = Q Xᵀ (rows x nx).
-            let mut s = Mat::<f64>::zeros(rows, nx);
+            // Sᵀ = X Qᵀ (nx x rows): column i holds query i's cross terms,
+            // contiguous for the scans below.
+            let mut s = Mat::<f64>::zeros(nx, rows);
             matmul(
                 s.as_mut(),
                 Accum::Replace,
-                q.as_ref(),
-                x_mat.transpose(),
+                x_mat,
+                q.transpose(),
                 1.0,
                 Par::Seq,
             );
@@ -57,7 +58,8 @@ pub fn nearest_rows(data: &DMatrix<f64>, queries: &DMatrix<f64>) -> Vec<usize> {
                 .map(|i| {
                     let qi: Vec<f64> = (0..d).map(|j| q[(i, j)]).collect();
                     let q_norm: f64 = qi.iter().map(|v| v * v).sum();
-                    let score = |k: usize| x_norm[k] - 2.0 * s[(i, k)];
+                    let col = s.col_as_slice(i);
+                    let score = |k: usize| x_norm[k] - 2.0 * col[k];
                     let mut best = f64::INFINITY;
                     let mut scale = q_norm;
                     for k in 0..nx {

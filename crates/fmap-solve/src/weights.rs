@@ -97,3 +97,65 @@ pub fn normalize_weights(energy: &mut FmapEnergy, relative: [f64; 4]) {
     energy.w_dcomm = relative[2] / total / tau[2];
     energy.w_orient = relative[3] / total / tau[3];
 }
+
+/// Re-expresses paired descriptors (`da`: n_A x p, `db`: n_B x p, column q
+/// of both is descriptor q) in an orthonormal basis of descriptor space
+/// ordered by importance, dropping the directions that carry nothing.
+///
+/// Every term of the energy, and every scale of [`term_scales`], is
+/// invariant under one orthogonal change of basis `Q` applied to the
+/// descriptor index of both shapes (`D_A Q`, `D_B Q`; multiplication and
+/// orientation operators are linear in the descriptor, so they transform
+/// alike). With `Q` the eigenvectors of the Gram matrix
+/// `G = D_Aᵀ M_A D_A + D_Bᵀ M_B D_B`, a direction with eigenvalue `g`
+/// contributes `O(g)` to every term; directions with
+/// `g ≤ rel_tol · g_max` are dropped. With `rel_tol` at rounding level
+/// (1e-15) the energy is unchanged to rounding while far fewer operators
+/// are needed: 100 WKS descriptors of a FAUST pair keep ~35 directions.
+///
+/// Returns the new descriptors (n_A x r, n_B x r).
+pub fn compress_descriptors(
+    da: &DMatrix<f64>,
+    mass_a: &nalgebra::DVector<f64>,
+    db: &DMatrix<f64>,
+    mass_b: &nalgebra::DVector<f64>,
+    rel_tol: f64,
+) -> crate::Result<(DMatrix<f64>, DMatrix<f64>)> {
+    if da.ncols() != db.ncols() {
+        return Err(crate::Error::SizeMismatch {
+            what: "descriptor counts of A and B",
+            found: db.ncols(),
+            expected: da.ncols(),
+        });
+    }
+    for (d, m, what) in [
+        (da, mass_a, "descriptor rows vs mass of A"),
+        (db, mass_b, "descriptor rows vs mass of B"),
+    ] {
+        if d.nrows() != m.len() {
+            return Err(crate::Error::SizeMismatch {
+                what,
+                found: d.nrows(),
+                expected: m.len(),
+            });
+        }
+    }
+    let gram = |d: &DMatrix<f64>, m: &nalgebra::DVector<f64>| {
+        let mut w = d.clone();
+        for (i, mut row) in w.row_iter_mut().enumerate() {
+            row *= m[i];
+        }
+        d.tr_mul(&w)
+    };
+    let g = gram(da, mass_a) + gram(db, mass_b);
+    let eig = nalgebra::SymmetricEigen::new(g);
+    let gmax = eig.eigenvalues.iter().fold(0.0f64, |a, &x| a.max(x));
+    let mut order: Vec<usize> = (0..eig.eigenvalues.len())
+        .filter(|&i| eig.eigenvalues[i] > rel_tol * gmax)
+        .collect();
+    order.sort_by(|&i, &j| eig.eigenvalues[j].total_cmp(&eig.eigenvalues[i]));
+    let q = DMatrix::from_fn(da.ncols(), order.len(), |r, c| {
+        eig.eigenvectors[(r, order[c])]
+    });
+    Ok((da * &q, db * &q))
+}

@@ -113,6 +113,11 @@ pub struct MatchParams {
     pub adjoint: bool,
     /// Eigensolver options.
     pub spectrum: SpectrumParams,
+    /// Rotate the descriptors of both shapes to an orthonormal basis of
+    /// their span and drop directions below rounding level
+    /// ([`fmaps_solve::compress_descriptors`]); the energy is unchanged to
+    /// rounding. On by default.
+    pub compress: bool,
 }
 
 impl Default for MatchParams {
@@ -133,6 +138,7 @@ impl Default for MatchParams {
             landmarks: Vec::new(),
             adjoint: false,
             spectrum: SpectrumParams::default(),
+            compress: true,
         }
     }
 }
@@ -344,6 +350,13 @@ pub fn match_prepared(
         || shape_descriptors(b, &lm_b, params),
     );
     let (da, db) = (da?, db?);
+    // The energy only sees the span of the descriptors: drop the directions
+    // below rounding level (exact to rounding, ~3x fewer operators).
+    let (da, db) = if params.compress {
+        solve::compress_descriptors(&da, &a.basis.mass, &db, &b.basis.mass, 1e-15)?
+    } else {
+        (da, db)
+    };
     // The map solved for is C_BA: source of C is B, target A.
     let (sb, sa) = (b.basis.truncate(k), a.basis.truncate(k));
     let descr_b = sb.project(&db);
