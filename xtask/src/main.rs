@@ -12,6 +12,7 @@
 mod bench;
 mod descriptor_check;
 mod eval;
+mod fit_check;
 mod geodesic_check;
 mod plot;
 mod util;
@@ -29,12 +30,14 @@ struct Cli {
 enum Command {
     /// Benchmark the Laplacian and the eigensolvers against SciPy.
     Bench(bench::Args),
-    /// The benchmark table over test pairs (published maps today).
+    /// The benchmark table over test pairs (published maps, fmaps-init, pyfm:<stage>).
     Eval(eval::Args),
     /// Compare HKS/WKS with pyFM's (needs the Python peers).
     DescriptorCheck(descriptor_check::Args),
     /// Compare exact geodesics with tvb-gdist (needs the Python peers).
     GeodesicCheck(geodesic_check::Args),
+    /// Exact functional-map minimum vs pyFM's L-BFGS-B fit, same inputs.
+    FitCheck(fit_check::Args),
 }
 
 fn main() -> anyhow::Result<()> {
@@ -43,5 +46,6 @@ fn main() -> anyhow::Result<()> {
         Command::Eval(a) => eval::eval(&a),
         Command::DescriptorCheck(a) => descriptor_check::descriptor_check(&a),
         Command::GeodesicCheck(a) => geodesic_check::geodesic_check(&a),
+        Command::FitCheck(a) => fit_check::fit_check(&a),
     }
 }

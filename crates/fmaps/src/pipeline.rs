@@ -359,48 +359,18 @@ pub fn match_prepared(
     };
     // The map solved for is C_BA: source of C is B, target A.
     let (sb, sa) = (b.basis.truncate(k), a.basis.truncate(k));
-    let descr_b = sb.project(&db);
-    let descr_a = sa.project(&da);
     times.descriptors = t.elapsed().as_secs_f64();
 
     let t = Instant::now();
-    let mut energy = solve::FmapEnergy::new(
-        descr_b,
-        descr_a,
-        match params.resolvent_gamma {
-            Some(g) => solve::resolvent_mask(&sb.eigenvalues, &sa.eigenvalues, g),
-            None => solve::laplacian_mask(&sb.eigenvalues, &sa.eigenvalues),
-        },
-    );
-    if params.w_dcomm > 0.0 {
-        let (xb, xa) = rayon::join(
-            || solve::multiplication_operators(&sb.eigenvectors, &sb.mass, &db),
-            || solve::multiplication_operators(&sa.eigenvectors, &sa.mass, &da),
-        );
-        energy.ops = xb?.into_iter().zip(xa?).collect();
-    }
-    if params.w_orient > 0.0 {
-        let (ob, oa) = rayon::join(
-            || solve::orientation_operators(&b.faces, &sb.eigenvectors, &db, false),
-            || {
-                solve::orientation_operators(
-                    &a.faces,
-                    &sa.eigenvectors,
-                    &da,
-                    params.orient_reversing,
-                )
-            },
-        );
-        energy.orient_ops = ob?.into_iter().zip(oa?).collect();
-    }
+    let mut energy = build_energy(
+        &ShapeData::of(b, &sb),
+        &ShapeData::of(a, &sa),
+        &db,
+        &da,
+        params,
+    )?;
     times.operators = t.elapsed().as_secs_f64();
-
     let t = Instant::now();
-    // Constants map to constants: φ_0 = ±1/sqrt(area) on both shapes.
-    let sign = (sb.eigenvectors[(0, 0)] * sa.eigenvectors[(0, 0)]).signum();
-    let mut c0 = DVector::zeros(k);
-    c0[0] = sign * (a.area / b.area).sqrt();
-    energy.fixed_first_column = Some(c0);
     solve::normalize_weights(
         &mut energy,
         [
@@ -432,4 +402,97 @@ pub fn match_prepared(
         energy: energy_value,
         times,
     })
+}
+
+/// What the energy needs of one shape, as plain arrays (so bases and
+/// descriptors from elsewhere, e.g. pyFM's, can be used as they are).
+#[derive(Debug, Clone, Copy)]
+pub struct ShapeData<'a> {
+    /// Oriented triangles.
+    pub faces: &'a [[usize; 3]],
+    /// The first k eigenvectors (n x k), M-orthonormal.
+    pub phi: &'a DMatrix<f64>,
+    /// The first k eigenvalues.
+    pub evals: &'a DVector<f64>,
+    /// The lumped mass.
+    pub mass: &'a DVector<f64>,
+    /// Total area.
+    pub area: f64,
+}
+
+impl<'a> ShapeData<'a> {
+    fn of(shape: &'a PreparedShape, truncated: &'a SpectralBasis) -> Self {
+        ShapeData {
+            faces: &shape.faces,
+            phi: &truncated.eigenvectors,
+            evals: &truncated.eigenvalues,
+            mass: &truncated.mass,
+            area: shape.area,
+        }
+    }
+}
+
+/// The energy of the functional map from `src` to `tgt` (k_tgt x k_src)
+/// for descriptors `d_src` (n_src x p) and `d_tgt`: coefficients, Laplacian
+/// mask, multiplication and orientation operators for the terms with a
+/// positive weight in `params`, and the fixed first column. The weights
+/// are left at the raw relative values; call
+/// [`fmaps_solve::normalize_weights`] to scale them.
+pub fn build_energy(
+    src: &ShapeData<'_>,
+    tgt: &ShapeData<'_>,
+    d_src: &DMatrix<f64>,
+    d_tgt: &DMatrix<f64>,
+    params: &MatchParams,
+) -> Result<solve::FmapEnergy, MatchError> {
+    let project = |s: &ShapeData<'_>, d: &DMatrix<f64>| -> Result<DMatrix<f64>, MatchError> {
+        if d.nrows() != s.phi.nrows() || s.mass.len() != s.phi.nrows() {
+            return Err(MatchError::InvalidParameter(format!(
+                "descriptors have {} rows, mass {}, basis {}",
+                d.nrows(),
+                s.mass.len(),
+                s.phi.nrows()
+            )));
+        }
+        let mut w = d.clone();
+        for (i, mut row) in w.row_iter_mut().enumerate() {
+            row *= s.mass[i];
+        }
+        Ok(s.phi.tr_mul(&w))
+    };
+    let mut energy = solve::FmapEnergy::new(
+        project(src, d_src)?,
+        project(tgt, d_tgt)?,
+        match params.resolvent_gamma {
+            Some(g) => solve::resolvent_mask(src.evals, tgt.evals, g),
+            None => solve::laplacian_mask(src.evals, tgt.evals),
+        },
+    );
+    energy.w_descr = params.w_descr;
+    energy.w_lap = params.w_lap;
+    energy.w_dcomm = params.w_dcomm;
+    energy.w_orient = params.w_orient;
+    if params.w_dcomm > 0.0 {
+        let (xs, xt) = rayon::join(
+            || solve::multiplication_operators(src.phi, src.mass, d_src),
+            || solve::multiplication_operators(tgt.phi, tgt.mass, d_tgt),
+        );
+        energy.ops = xs?.into_iter().zip(xt?).collect();
+    }
+    if params.w_orient > 0.0 {
+        let (os, ot) = rayon::join(
+            || solve::orientation_operators(src.faces, src.phi, d_src, false),
+            || solve::orientation_operators(tgt.faces, tgt.phi, d_tgt, params.orient_reversing),
+        );
+        energy.orient_ops = os?.into_iter().zip(ot?).collect();
+    }
+    // Constants map to constants: φ_0 = ±1/sqrt(area) on both shapes.
+    let k_tgt = tgt.phi.ncols();
+    let mut c0 = DVector::zeros(k_tgt);
+    if k_tgt > 0 && src.phi.ncols() > 0 {
+        let sign = (src.phi[(0, 0)] * tgt.phi[(0, 0)]).signum();
+        c0[0] = sign * (tgt.area / src.area).sqrt();
+    }
+    energy.fixed_first_column = Some(c0);
+    Ok(energy)
 }
