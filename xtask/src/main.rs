@@ -12,6 +12,7 @@
 mod bench;
 mod descriptor_check;
 mod eval;
+mod figures;
 mod fit_check;
 mod geodesic_check;
 mod plot;
@@ -38,6 +39,8 @@ enum Command {
     GeodesicCheck(geodesic_check::Args),
     /// Exact functional-map minimum vs pyFM's L-BFGS-B fit, same inputs.
     FitCheck(fit_check::Args),
+    /// The seed paper's Figure 8 curve and Figure 1 heat maps, into docs/.
+    Figures(figures::Args),
 }
 
 fn main() -> anyhow::Result<()> {
@@ -47,5 +50,6 @@ fn main() -> anyhow::Result<()> {
         Command::DescriptorCheck(a) => descriptor_check::descriptor_check(&a),
         Command::GeodesicCheck(a) => geodesic_check::geodesic_check(&a),
         Command::FitCheck(a) => fit_check::fit_check(&a),
+        Command::Figures(a) => figures::figures(&a),
     }
 }

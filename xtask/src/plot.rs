@@ -170,3 +170,53 @@ pub fn line_plot_png(path: &Path, plot: &Plot<'_>, series: &[Series]) -> anyhow:
     enc.write_header()?.write_image_data(&cv.px)?;
     Ok(())
 }
+
+/// A matrix as a heat map (seed paper, Figure 1): |value| from white (0) to
+/// dark (>= `vmax`), positive in red and negative in blue, with a title
+/// and the matrix size. One square cell per entry, scaled to ~560 px.
+pub fn heatmap_png(
+    path: &Path,
+    title: &str,
+    m: &nalgebra::DMatrix<f64>,
+    vmax: f64,
+) -> anyhow::Result<()> {
+    let (rows, cols) = m.shape();
+    let cell = (540 / rows.max(cols).max(1)).max(1);
+    let (x0, y0) = ((W - cell * cols) / 2, TOP + 10);
+    let mut cv = Canvas {
+        px: vec![255; W * H * 3],
+    };
+    let black = [0, 0, 0];
+    cv.text(x0 as i64, 20, title, 2, black);
+    for i in 0..rows {
+        for j in 0..cols {
+            let v = m[(i, j)];
+            let t = (v.abs() / vmax).min(1.0);
+            let fade = |full: u8| (255.0 - t * (255.0 - f64::from(full))).round() as u8;
+            let c = if v >= 0.0 {
+                [fade(178), fade(24), fade(43)]
+            } else {
+                [fade(33), fade(102), fade(172)]
+            };
+            for dy in 0..cell {
+                for dx in 0..cell {
+                    cv.set((x0 + j * cell + dx) as i64, (y0 + i * cell + dy) as i64, c);
+                }
+            }
+        }
+    }
+    let (bx, by) = (x0 as i64, (y0 + rows * cell + 14) as i64);
+    cv.text(
+        bx,
+        by,
+        &format!("{rows} x {cols}; red > 0, blue < 0, full colour at |C_ij| >= {vmax}"),
+        1,
+        black,
+    );
+    let file = std::io::BufWriter::new(std::fs::File::create(path)?);
+    let mut enc = png::Encoder::new(file, W as u32, H as u32);
+    enc.set_color(png::ColorType::Rgb);
+    enc.set_depth(png::BitDepth::Eight);
+    enc.write_header()?.write_image_data(&cv.px)?;
+    Ok(())
+}
