@@ -10,6 +10,7 @@
 //!   relative difference, time per source).
 
 mod bench;
+mod bench_match;
 mod descriptor_check;
 mod eval;
 mod figures;
@@ -39,6 +40,8 @@ enum Command {
     GeodesicCheck(geodesic_check::Args),
     /// Exact functional-map minimum vs pyFM's L-BFGS-B fit, same inputs.
     FitCheck(fit_check::Args),
+    /// `fmaps match` stage by stage against pyFM's same pipeline.
+    BenchMatch(bench_match::Args),
     /// The seed paper's Figure 8 curve and Figure 1 heat maps, into docs/.
     Figures(figures::Args),
 }
@@ -51,5 +54,6 @@ fn main() -> anyhow::Result<()> {
         Command::GeodesicCheck(a) => geodesic_check::geodesic_check(&a),
         Command::FitCheck(a) => fit_check::fit_check(&a),
         Command::Figures(a) => figures::figures(&a),
+        Command::BenchMatch(a) => bench_match::bench_match(&a),
     }
 }

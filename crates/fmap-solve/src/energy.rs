@@ -264,7 +264,7 @@ impl FmapEnergy {
             }
         }
         let x = solve_spd(
-            h.as_ref().submatrix(free, free, m - free, m - free),
+            h.as_mut().submatrix_mut(free, free, m - free, m - free),
             &rhs[free..],
         )?;
         let mut c = DMatrix::zeros(kb, ka);
@@ -297,7 +297,7 @@ impl FmapEnergy {
                     *r -= self.w_descr * aat[(j + j0, 0)] * c0[i];
                 }
             }
-            let row = solve_spd(h.as_ref(), &rhs)?;
+            let row = solve_spd(h.as_mut(), &rhs)?;
             for (j, v) in row.into_iter().enumerate() {
                 c[(i, j + j0)] = v;
             }
@@ -390,7 +390,7 @@ impl FmapEnergy {
 /// largest diagonal entry picks one (the nearly minimum-norm one) at no
 /// measurable cost in energy; if the factorization still fails the ridge
 /// grows by 100x, up to 1e-5. An all-zero H is an error.
-fn solve_spd(h: MatRef<'_, f64>, b: &[f64]) -> Result<Vec<f64>> {
+fn solve_spd(mut h: faer::MatMut<'_, f64>, b: &[f64]) -> Result<Vec<f64>> {
     let n = h.nrows();
     if n == 0 {
         return Ok(Vec::new());
@@ -400,13 +400,16 @@ fn solve_spd(h: MatRef<'_, f64>, b: &[f64]) -> Result<Vec<f64>> {
         return Err(Error::NotPositiveDefinite);
     }
     use faer::linalg::solvers::SolveCore;
+    // The factorization works on its own copy: the ridge is added to H in
+    // place, each retry adding the difference.
     let mut ridge = 1e-13;
+    let mut added = 0.0;
     while ridge <= 1e-5 {
-        let mut hr = h.to_owned();
         for i in 0..n {
-            hr[(i, i)] += ridge * max_diag;
+            h[(i, i)] += (ridge - added) * max_diag;
         }
-        if let Ok(llt) = hr.llt(Side::Lower) {
+        added = ridge;
+        if let Ok(llt) = h.as_ref().llt(Side::Lower) {
             let mut x = b.to_vec();
             let xm = faer::MatMut::from_column_major_slice_mut(&mut x, n, 1);
             llt.solve_in_place_with_conj(faer::Conj::No, xm);

@@ -134,3 +134,26 @@ fn bad_sizes_are_errors() {
         Err(Error::SizeMismatch { .. })
     ));
 }
+
+/// Rows closer than f32 can resolve: the f32 GEMM only selects candidates,
+/// the f64 re-check must still return the true nearest row.
+#[test]
+fn nearest_rows_resolves_below_f32_precision() {
+    let d = 30;
+    let base: Vec<f64> = (0..d).map(|j| 1.0 + 0.37 * j as f64).collect();
+    // 50 rows equal to `base` up to 1e-9 offsets (f32 rounds them alike).
+    let x = DMatrix::from_fn(50, d, |i, j| {
+        base[j] + if j == 3 { 1e-9 * i as f64 } else { 0.0 }
+    });
+    for target in [0usize, 17, 49] {
+        let q = DMatrix::from_fn(1, d, |_, j| {
+            base[j]
+                + if j == 3 {
+                    1e-9 * target as f64 + 2e-10
+                } else {
+                    0.0
+                }
+        });
+        assert_eq!(nearest_rows(&x, &q), vec![target]);
+    }
+}

@@ -1,0 +1,160 @@
+//! `cargo xtask bench-match`: per-stage time of the matching pipeline
+//! (no refinement) against pyFM's same pipeline on the same pair, in the
+//! same run (`../shared/peers/pyfm_pipeline.py --bench-pair`).
+
+use std::path::PathBuf;
+use std::process::Command;
+use std::time::Instant;
+
+use anyhow::bail;
+use fmaps::MatchParams;
+use fmaps::eval::Collection;
+use fmaps::pipeline::{match_prepared, prepare};
+use serde_json::json;
+
+use crate::util::{data_dir, peer_python, peers_dir, root, run};
+
+/// Options of `cargo xtask bench-match`.
+#[derive(clap::Args)]
+pub struct Args {
+    #[command(flatten)]
+    peers: crate::util::PeerArgs,
+    /// Collection.
+    #[arg(long, default_value = "FAUST")]
+    collection: String,
+    /// Index of the test pair.
+    #[arg(long, default_value_t = 0)]
+    pair: usize,
+    /// Repetitions (medians are reported).
+    #[arg(long, default_value_t = 3)]
+    repeat: usize,
+    /// Threads for both sides.
+    #[arg(long, default_value_t = 1)]
+    threads: usize,
+}
+
+fn median(mut v: Vec<f64>) -> f64 {
+    v.sort_by(f64::total_cmp);
+    if v.is_empty() {
+        f64::NAN
+    } else {
+        v[v.len() / 2]
+    }
+}
+
+pub fn bench_match(args: &Args) -> anyhow::Result<()> {
+    let Some(py) = peer_python(args.peers.python.as_deref()) else {
+        bail!("the Python peers are not set up: run ../shared/peers/setup.sh");
+    };
+    let dataset = data_dir(args.peers.data.as_deref())
+        .join("bcicp")
+        .join(&args.collection);
+    let c = Collection::open(dataset.parent().unwrap_or(&dataset), &args.collection)?;
+    let pairs = c.test_pairs()?;
+    let Some((a, b)) = pairs.get(args.pair).cloned() else {
+        bail!("{} has {} test pairs", args.collection, pairs.len());
+    };
+    // fmaps, in a pool of the requested size.
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(args.threads)
+        .build()?;
+    let mut stages: Vec<[f64; 6]> = Vec::new();
+    for _ in 0..args.repeat {
+        let row = pool.install(|| -> anyhow::Result<[f64; 6]> {
+            let t = Instant::now();
+            let (ma, mb) = (c.read_mesh(&a)?, c.read_mesh(&b)?);
+            let load = t.elapsed().as_secs_f64();
+            let p = MatchParams::default();
+            let t = Instant::now();
+            let (pa, pb) = (prepare(&ma, &p)?, prepare(&mb, &p)?);
+            let spectra = t.elapsed().as_secs_f64();
+            let r = match_prepared(&pa, &pb, &p)?;
+            let s = r.times;
+            Ok([
+                load,
+                spectra,
+                s.descriptors,
+                s.operators + s.solve,
+                s.point_map,
+                0.0,
+            ])
+        })?;
+        let mut row = row;
+        row[5] = row[..5].iter().sum();
+        stages.push(row);
+    }
+    let ours: Vec<f64> = (0..6)
+        .map(|i| median(stages.iter().map(|r| r[i]).collect()))
+        .collect();
+
+    let out = std::env::temp_dir().join(format!("fmaps-bench-match-{}", std::process::id()));
+    run(Command::new(&py)
+        .arg(peers_dir().join("pyfm_pipeline.py"))
+        .arg(&dataset)
+        .args(["--bench-pair", &args.pair.to_string()])
+        .args(["--repeat", &args.repeat.to_string()])
+        .args(["--threads", &args.threads.to_string()])
+        .args(["--orient-weight", "1.0", "--out"])
+        .arg(&out))?;
+    let file = std::fs::read_dir(&out)?
+        .filter_map(Result::ok)
+        .map(|e| e.path())
+        .find(|p| p.extension().is_some_and(|x| x == "json"))
+        .ok_or_else(|| anyhow::anyhow!("pyfm_pipeline.py wrote no JSON"))?;
+    let v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&file)?)?;
+    let m = &v["median"];
+    let g = |k: &str| m[k].as_f64().unwrap_or(0.0);
+    let peer = [
+        g("load"),
+        g("laplacian") + g("eig"),
+        g("setup") + g("descr"),
+        g("fit_orient"),
+        g("p2p_orient"),
+        0.0,
+    ];
+    let mut peer = peer;
+    peer[5] = peer[..5].iter().sum();
+    let _ = std::fs::remove_dir_all(&out);
+
+    println!(
+        "{} {a} -> {b}, {} thread(s), median of {}",
+        args.collection, args.threads, args.repeat
+    );
+    println!(
+        "{:<34} {:>9} {:>9} {:>8}",
+        "stage", "fmaps s", "pyFM s", "ratio"
+    );
+    let names = [
+        "load both meshes",
+        "Laplacians + eigenbases (k=200)",
+        "descriptors (WKS)",
+        "fit with orientation term",
+        "point map",
+        "total (fmaps match, no refinement)",
+    ];
+    for i in 0..6 {
+        println!(
+            "{:<34} {:>9.3} {:>9.3} {:>7.1}x",
+            names[i],
+            ours[i],
+            peer[i],
+            peer[i] / ours[i]
+        );
+    }
+    let fit_p2p = (peer[3] + peer[4]) / (ours[3] + ours[4]);
+    println!("fit + point map: {fit_p2p:.1}x faster than pyFM");
+    let path: PathBuf = root().join(format!(
+        "target/bench/match-{}-pair{}-threads{}.json",
+        args.collection, args.pair, args.threads
+    ));
+    std::fs::create_dir_all(path.parent().unwrap_or(&root()))?;
+    std::fs::write(
+        &path,
+        serde_json::to_string_pretty(&json!({
+            "pair": [a, b], "threads": args.threads, "repeat": args.repeat,
+            "stages": names, "fmaps": ours, "pyfm": peer, "fit_p2p_ratio": fit_p2p,
+        }))?,
+    )?;
+    println!("{}", path.display());
+    Ok(())
+}
