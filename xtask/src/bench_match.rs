@@ -66,7 +66,9 @@ pub fn bench_match(args: &Args) -> anyhow::Result<()> {
             let load = t.elapsed().as_secs_f64();
             let p = MatchParams::default();
             let t = Instant::now();
-            let (pa, pb) = (prepare(&ma, &p)?, prepare(&mb, &p)?);
+            // Side by side, as `fmaps match` does.
+            let (pa, pb) = rayon::join(|| prepare(&ma, &p), || prepare(&mb, &p));
+            let (pa, pb) = (pa?, pb?);
             let spectra = t.elapsed().as_secs_f64();
             let r = match_prepared(&pa, &pb, &p)?;
             let s = r.times;
