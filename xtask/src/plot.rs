@@ -44,6 +44,15 @@ struct Canvas {
 }
 
 impl Canvas {
+    fn write_png(&self, path: &Path) -> anyhow::Result<()> {
+        let file = std::io::BufWriter::new(std::fs::File::create(path)?);
+        let mut enc = png::Encoder::new(file, W as u32, H as u32);
+        enc.set_color(png::ColorType::Rgb);
+        enc.set_depth(png::BitDepth::Eight);
+        enc.write_header()?.write_image_data(&self.px)?;
+        Ok(())
+    }
+
     fn set(&mut self, x: i64, y: i64, c: [u8; 3]) {
         if x >= 0 && y >= 0 && (x as usize) < W && (y as usize) < H {
             let i = 3 * (y as usize * W + x as usize);
@@ -163,12 +172,7 @@ pub fn line_plot_png(path: &Path, plot: &Plot<'_>, series: &[Series]) -> anyhow:
         );
         cv.text(lx + 40, ly, &s.label, 1, black);
     }
-    let file = std::io::BufWriter::new(std::fs::File::create(path)?);
-    let mut enc = png::Encoder::new(file, W as u32, H as u32);
-    enc.set_color(png::ColorType::Rgb);
-    enc.set_depth(png::BitDepth::Eight);
-    enc.write_header()?.write_image_data(&cv.px)?;
-    Ok(())
+    cv.write_png(path)
 }
 
 /// A matrix as a heat map (seed paper, Figure 1): |value| from white (0) to
@@ -213,10 +217,5 @@ pub fn heatmap_png(
         1,
         black,
     );
-    let file = std::io::BufWriter::new(std::fs::File::create(path)?);
-    let mut enc = png::Encoder::new(file, W as u32, H as u32);
-    enc.set_color(png::ColorType::Rgb);
-    enc.set_depth(png::BitDepth::Eight);
-    enc.write_header()?.write_image_data(&cv.px)?;
-    Ok(())
+    cv.write_png(path)
 }

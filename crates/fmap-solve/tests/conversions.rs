@@ -1,29 +1,14 @@
 //! Point maps <-> functional maps on shapes with known correspondence.
 
-use fmaps_eigensolve::{EigenProblem, EigenSolver, NativeSolver, SpectralBasis};
-use fmaps_laplacian::{LaplacianParams, cotan_laplacian};
 use fmaps_mesh_io::TriMesh;
-use fmaps_mesh_io::generate::torus;
 use fmaps_solve::*;
 use nalgebra::DMatrix;
 
-fn bumpy() -> TriMesh {
-    let (mut v, f) = torus(2.0, 0.8, 24, 14).into_parts();
-    for (k, p) in v.iter_mut().enumerate() {
-        let s = 1.0 + 0.08 * ((k * 31 % 17) as f64 / 17.0 - 0.5);
-        *p = [p[0] * s, p[1] * s * 1.1, p[2] * (2.0 - s)];
-    }
-    TriMesh::new(v, f).unwrap()
-}
+mod common;
+use common::basis;
 
-fn basis(mesh: &TriMesh, k: usize) -> SpectralBasis {
-    let op = cotan_laplacian(mesh, &LaplacianParams::default());
-    NativeSolver::default()
-        .solve(
-            &EigenProblem::new(op.stiffness.view(), &op.mass).unwrap(),
-            k,
-        )
-        .unwrap()
+fn bumpy() -> TriMesh {
+    common::bumpy(24, 14)
 }
 
 /// B is A with its vertices permuted; the bases are computed independently

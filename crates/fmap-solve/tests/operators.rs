@@ -1,29 +1,15 @@
 //! Descriptor multiplication and orientation operators on real meshes.
 
-use fmaps_eigensolve::{EigenProblem, EigenSolver, NativeSolver, SpectralBasis};
-use fmaps_laplacian::{LaplacianParams, cotan_laplacian};
 use fmaps_mesh_io::TriMesh;
-use fmaps_mesh_io::generate::{grid, torus};
+use fmaps_mesh_io::generate::grid;
 use fmaps_solve::*;
 use nalgebra::DMatrix;
 
-fn bumpy() -> TriMesh {
-    let (mut v, f) = torus(2.0, 0.8, 20, 11).into_parts();
-    for (k, p) in v.iter_mut().enumerate() {
-        let s = 1.0 + 0.08 * ((k * 31 % 17) as f64 / 17.0 - 0.5);
-        *p = [p[0] * s, p[1] * s * 1.1, p[2] * (2.0 - s)];
-    }
-    TriMesh::new(v, f).unwrap()
-}
+mod common;
+use common::basis;
 
-fn basis(mesh: &TriMesh, k: usize) -> SpectralBasis {
-    let op = cotan_laplacian(mesh, &LaplacianParams::default());
-    NativeSolver::default()
-        .solve(
-            &EigenProblem::new(op.stiffness.view(), &op.mass).unwrap(),
-            k,
-        )
-        .unwrap()
+fn bumpy() -> TriMesh {
+    common::bumpy(20, 11)
 }
 
 /// Smooth, non-symmetric test functions of the coordinates.
