@@ -33,6 +33,7 @@
 mod energy;
 mod nn;
 mod operators;
+mod types;
 mod weights;
 
 use fmaps_eigensolve::SpectralBasis;
@@ -43,6 +44,7 @@ pub use energy::{
 };
 pub use nn::nearest_rows;
 pub use operators::{multiplication_operators, orientation_operators};
+pub use types::{FunctionalMap, PointMap};
 pub use weights::{
     compress_descriptors, effective_descriptor_count, normalize_weights, term_scales,
 };

@@ -142,3 +142,33 @@ fn nearest_rows_resolves_below_f32_precision() {
         assert_eq!(nearest_rows(&x, &q), vec![target]);
     }
 }
+
+/// The typed wrappers carry direction: a permutation B -> A induces the
+/// functional map A -> B, which converts back to the same point map.
+#[test]
+fn typed_maps_round_trip_and_check_sizes() {
+    let a = bumpy();
+    let n = a.n_vertices();
+    let ba = basis(&a, 12);
+    let identity = PointMap::new((0..n).collect(), n).unwrap();
+    let c = FunctionalMap::from_point_map(&identity, &ba, &ba).unwrap();
+    assert_eq!((c.k_source(), c.k_target()), (12, 12));
+    assert!((c.matrix() - DMatrix::identity(12, 12)).amax() < 1e-10);
+    assert_eq!(c.to_point_map(&ba, &ba, false).unwrap(), identity);
+    assert_eq!(c.to_point_map(&ba, &ba, true).unwrap(), identity);
+    let coeffs = DMatrix::from_fn(12, 2, |i, j| (i + j) as f64);
+    assert!((c.transfer_coefficients(&coeffs).unwrap() - &coeffs).amax() < 1e-9);
+    assert!(matches!(
+        c.transfer_coefficients(&DMatrix::zeros(5, 1)),
+        Err(Error::SizeMismatch { .. })
+    ));
+    assert!(matches!(
+        PointMap::new(vec![0, n], n),
+        Err(Error::IndexOutOfRange { at: 1, .. })
+    ));
+    let short = PointMap::new(vec![0; n], n - 1).unwrap();
+    assert!(matches!(
+        FunctionalMap::from_point_map(&short, &ba, &ba),
+        Err(Error::SizeMismatch { .. })
+    ));
+}
