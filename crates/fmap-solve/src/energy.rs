@@ -30,6 +30,7 @@
 use faer::linalg::matmul::matmul;
 use faer::{Accum, Mat, MatRef, Par, Side};
 use nalgebra::{DMatrix, DVector};
+use rayon::prelude::*;
 
 use crate::{Error, Result};
 
@@ -359,24 +360,31 @@ impl FmapEnergy {
         // along columns.
         let mut rt = Mat::<f64>::zeros(kb * kb, ka * ka);
         matmul(rt.as_mut(), Accum::Replace, yv, xv.transpose(), 1.0, par);
-        for l in 0..ka {
-            for r in 0..kb {
-                let col = r + kb * l;
-                for j in 0..ka {
-                    let (jl, lj) = (j + ka * l, l + ka * j);
-                    let x_jl = xxt[(j, l)];
-                    let (c_jl, c_lj) = (rt.col_as_slice(jl), rt.col_as_slice(lj));
-                    for i in 0..kb {
-                        let mut v = -c_jl[i + kb * r] - c_lj[r + kb * i];
-                        if i == r {
-                            v += x_jl;
-                        }
-                        if j == l {
-                            v += yty[(i, r)];
-                        }
-                        h[(i + kb * j, col)] += v;
+        // Columns are independent: fill them in parallel into a dense
+        // column-major buffer, then add it to H.
+        let m = ka * kb;
+        let mut buf = vec![0.0; m * m];
+        buf.par_chunks_mut(m).enumerate().for_each(|(col, out)| {
+            let (r, l) = (col % kb, col / kb);
+            for j in 0..ka {
+                let (jl, lj) = (j + ka * l, l + ka * j);
+                let x_jl = xxt[(j, l)];
+                let (c_jl, c_lj) = (rt.col_as_slice(jl), rt.col_as_slice(lj));
+                let dst = &mut out[kb * j..kb * (j + 1)];
+                for (i, o) in dst.iter_mut().enumerate() {
+                    *o = -c_jl[i + kb * r] - c_lj[r + kb * i];
+                }
+                dst[r] += x_jl;
+                if j == l {
+                    for (i, o) in dst.iter_mut().enumerate() {
+                        *o += yty[(i, r)];
                     }
                 }
+            }
+        });
+        for (col, src) in buf.chunks(m).enumerate() {
+            for (row, v) in src.iter().enumerate() {
+                h[(row, col)] += v;
             }
         }
     }
