@@ -41,6 +41,7 @@ pub use fmaps_eval as eval;
 pub use fmaps_geodesic as geodesic;
 pub use fmaps_laplacian as laplacian;
 pub use fmaps_mesh_io as mesh_io;
+pub use fmaps_refine as refine;
 pub use fmaps_solve as solve;
 pub use pipeline::{MatchParams, MatchResult, match_shapes};
 

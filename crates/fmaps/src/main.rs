@@ -28,6 +28,7 @@ enum Command {
     /// (exact solve with the orientation term), point map A -> B.
     #[command(
         after_help = "Examples:\n  fmaps match tr_reg_000.off tr_reg_001.off --out tr_reg_000_tr_reg_001.map\n  \
+fmaps match tr_reg_000.off tr_reg_001.off --refine zoomout --zoomout 30:200:1 --out A_B.map\n  \
 fmaps match cat0.off cat1.off --k 60 --json --save-fmap C.txt\n\n\
 Defaults are the literature's automatic pipeline (pyFM's): 200 eigenpairs, 100 WKS from 128,\n\
 a 50 x 50 map, weights descr 0.1, lap 1e-3 (resolvent mask), dcomm 1, orientation 1."
@@ -150,6 +151,26 @@ struct MatchArgs {
     /// Relative weight of the orientation-preserving term (0 = off).
     #[arg(long, default_value_t = 1.0)]
     w_orient: f64,
+    /// Refinement of the initial map (`--zoomout` alone implies zoomout).
+    #[arg(long, value_enum)]
+    refine: Option<RefineKind>,
+    /// ZoomOut schedule START:FINAL:STEP (the basis grows from START to
+    /// FINAL by STEP; FINAL eigenpairs are computed if k-process is lower).
+    #[arg(long, value_name = "START:FINAL:STEP")]
+    zoomout: Option<String>,
+    /// ICP iterations (stops earlier at a fixed point).
+    #[arg(long, default_value_t = 10)]
+    icp_iterations: usize,
+    /// Run the ZoomOut iterations on this many farthest points per shape
+    /// (the paper's fast variant); the final map covers all vertices.
+    #[arg(long)]
+    refine_samples: Option<usize>,
+    /// Bijective ZoomOut: refine both directions together.
+    #[arg(long)]
+    bijective: bool,
+    /// Convert maps with the adjoint of C (initial map and refinement).
+    #[arg(long)]
+    adjoint: bool,
     /// Write C_BA (k x k, functions on B to functions on A) as text.
     #[arg(long)]
     save_fmap: Option<PathBuf>,
@@ -159,6 +180,16 @@ struct MatchArgs {
     /// Print one JSON object (stage times, map metrics, energy).
     #[arg(long)]
     json: bool,
+}
+
+#[derive(Clone, Copy, PartialEq, Eq, ValueEnum)]
+enum RefineKind {
+    /// No refinement.
+    None,
+    /// Spectral ICP (orthogonal Procrustes) at the map's size.
+    Icp,
+    /// ZoomOut spectral upsampling.
+    Zoomout,
 }
 
 #[derive(Clone, Copy, ValueEnum)]
@@ -729,6 +760,58 @@ fn read_landmarks(path: &Path) -> Result<Vec<(usize, usize)>, Failure> {
     Ok(out)
 }
 
+/// The refinement asked for on the command line.
+fn refinement(args: &MatchArgs) -> Result<fmaps::pipeline::Refinement, Failure> {
+    use fmaps::pipeline::Refinement;
+    let kind = match (args.refine, &args.zoomout) {
+        (Some(k), _) => k,
+        (None, Some(_)) => RefineKind::Zoomout,
+        (None, None) => RefineKind::None,
+    };
+    let bad = |m: String| Err(input(anyhow::anyhow!(m)));
+    Ok(match kind {
+        RefineKind::None => Refinement::None,
+        RefineKind::Icp => Refinement::Icp(fmaps_refine::Icp {
+            max_iterations: args.icp_iterations,
+            adjoint: args.adjoint,
+        }),
+        RefineKind::Zoomout => {
+            let (k_start, k_final, step) = match &args.zoomout {
+                None => (50, 150, 5),
+                Some(text) => {
+                    let parts: Vec<Option<usize>> =
+                        text.split(':').map(|p| p.trim().parse().ok()).collect();
+                    match parts.as_slice() {
+                        [Some(a), Some(b), Some(c)] if *a > 0 && a <= b && *c > 0 => (*a, *b, *c),
+                        _ => {
+                            return bad(format!(
+                                "--zoomout '{text}': expected START:FINAL:STEP with 0 < START <= FINAL and STEP >= 1, e.g. 30:200:1"
+                            ));
+                        }
+                    }
+                }
+            };
+            if k_start > args.k {
+                return bad(format!(
+                    "--zoomout starts at {k_start}, but the initial map is only {k} x {k} (--k {k})",
+                    k = args.k
+                ));
+            }
+            Refinement::ZoomOut {
+                zoomout: fmaps_refine::ZoomOut {
+                    k_start,
+                    k_final,
+                    step,
+                    adjoint: args.adjoint,
+                    bijective: args.bijective,
+                    subsample: None,
+                },
+                samples: args.refine_samples,
+            }
+        }
+    })
+}
+
 fn match_cmd(args: &MatchArgs) -> Result<(), Failure> {
     use fmaps::pipeline::{MatchError, MatchParams, match_shapes};
     let t = Instant::now();
@@ -747,6 +830,9 @@ fn match_cmd(args: &MatchArgs) -> Result<(), Failure> {
     if let Some(p) = &args.landmarks {
         params.landmarks = read_landmarks(p)?;
     }
+    params.adjoint = args.adjoint;
+    params.refine = refinement(args)?;
+    params.k_process = params.k_process.max(params.refine.k_needed());
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(args.threads)
         .build()
@@ -778,7 +864,16 @@ fn match_cmd(args: &MatchArgs) -> Result<(), Failure> {
             "out": args.out.as_ref().map(|p| p.display().to_string()),
             "seconds": {"load": load_seconds, "spectra": r.times.spectra,
                 "descriptors": r.times.descriptors, "operators": r.times.operators,
-                "solve": r.times.solve, "point_map": r.times.point_map, "total": total},
+                "solve": r.times.solve, "point_map": r.times.point_map,
+                "refine": r.times.refine, "total": total},
+            "refine": r.refine.as_ref().map(|rep| json!({
+                "method": rep.method, "iterations": rep.iterations.len(),
+                "converged": rep.converged, "nn_searches": rep.nn_searches,
+                "nn_seconds": rep.nn_seconds, "seconds": rep.seconds,
+                "final_k": r.c_ba.ncols(),
+                "changed_per_iteration": rep.iterations.iter().map(|i| i.changed).collect::<Vec<_>>(),
+            })),
+            "changed_by_refinement": r.t_ab.iter().zip(&r.t_ab_init).filter(|(x, y)| x != y).count(),
             "energy": r.energy,
             "energy_terms": {"descr": r.energy_terms[0], "lap": r.energy_terms[1],
                 "dcomm": r.energy_terms[2], "orient": r.energy_terms[3]},
@@ -806,6 +901,7 @@ fn match_cmd(args: &MatchArgs) -> Result<(), Failure> {
         ("operators", st.operators),
         ("solve", st.solve),
         ("point map", st.point_map),
+        ("refinement", st.refine),
         ("total", total),
     ] {
         outln!(o, "  {name:<18} {sec:>8.3} s");
@@ -817,6 +913,19 @@ fn match_cmd(args: &MatchArgs) -> Result<(), Failure> {
         r.metrics.laplacian_commutativity,
         100.0 * r.metrics.sparsity
     );
+    if let Some(rep) = &r.refine {
+        let changed = r
+            .t_ab
+            .iter()
+            .zip(&r.t_ab_init)
+            .filter(|(x, y)| x != y)
+            .count();
+        outln!(
+            o,
+            "refinement: {rep}; {changed} of {} vertices moved",
+            r.t_ab.len()
+        );
+    }
     match &args.out {
         Some(p) => outln!(o, "wrote {}", p.display()),
         None => outln!(o, "(no --out: map not written)"),

@@ -12,7 +12,10 @@
 //!    commutativity and orientation preservation, with the first column
 //!    fixed (constants to constants), solved exactly,
 //! 4. the point map `T_AB` (a vertex of B for every vertex of A) by exact
-//!    nearest neighbours in the spectral embedding.
+//!    nearest neighbours in the spectral embedding,
+//! 5. optionally a refinement of `C_BA` and `T_AB` ([`Refinement`]: ICP or
+//!    ZoomOut from `fmaps-refine`, or any [`fmaps_refine::Refiner`] through
+//!    [`refine_result`]).
 //!
 //! The direction follows the dataset convention: the map file `A_B.map`
 //! lists a B vertex per A vertex, and `T_AB` is read off `C_BA` (pull-back
@@ -30,6 +33,7 @@ use std::time::Instant;
 use fmaps_descriptors as descriptors;
 use fmaps_eigensolve::SpectralBasis;
 use fmaps_mesh_io::TriMesh;
+use fmaps_refine::{self as refine, RefineReport, Refiner};
 use fmaps_solve as solve;
 use nalgebra::{DMatrix, DVector};
 
@@ -53,9 +57,55 @@ pub enum MatchError {
     /// The solve or the conversion failed.
     #[error("functional map: {0}")]
     Solve(#[from] solve::Error),
+    /// The refinement failed.
+    #[error("refinement: {0}")]
+    Refine(#[from] refine::Error),
     /// A parameter is out of range.
     #[error("invalid parameter: {0}")]
     InvalidParameter(String),
+}
+
+/// The refinement stage of the pipeline.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub enum Refinement {
+    /// The initial map as solved.
+    #[default]
+    None,
+    /// Spectral ICP at the map's size.
+    Icp(refine::Icp),
+    /// ZoomOut (its `subsample` is ignored: use `samples`).
+    ZoomOut {
+        /// Schedule and variants.
+        zoomout: refine::ZoomOut,
+        /// Run the iterations on this many farthest points per shape
+        /// (Euclidean farthest point sampling from vertex 0); `None`: all
+        /// vertices.
+        samples: Option<usize>,
+    },
+}
+
+impl Refinement {
+    /// ZoomOut with a schedule and no sub-sampling.
+    pub fn zoomout(k_start: usize, k_final: usize, step: usize) -> Self {
+        Refinement::ZoomOut {
+            zoomout: refine::ZoomOut {
+                k_start,
+                k_final,
+                step,
+                ..refine::ZoomOut::default()
+            },
+            samples: None,
+        }
+    }
+
+    /// The largest basis size the refinement needs.
+    pub fn k_needed(&self) -> usize {
+        match self {
+            Refinement::None => 0,
+            Refinement::Icp(_) => 0,
+            Refinement::ZoomOut { zoomout, .. } => zoomout.k_final,
+        }
+    }
 }
 
 /// The descriptor family.
@@ -113,6 +163,8 @@ pub struct MatchParams {
     pub adjoint: bool,
     /// Eigensolver options.
     pub spectrum: SpectrumParams,
+    /// Refinement of the initial map (none by default).
+    pub refine: Refinement,
     /// Rotate the descriptors of both shapes to an orthonormal basis of
     /// their span and drop directions below rounding level
     /// ([`fmaps_solve::compress_descriptors`]); the energy is unchanged to
@@ -139,6 +191,7 @@ impl Default for MatchParams {
             adjoint: false,
             spectrum: SpectrumParams::default(),
             compress: true,
+            refine: Refinement::None,
         }
     }
 }
@@ -161,6 +214,13 @@ impl MatchParams {
         if self.n_descr == 0 || self.subsample == 0 {
             return bad("n_descr and subsample must be positive".into());
         }
+        if self.refine.k_needed() > self.k_process {
+            return bad(format!(
+                "the refinement needs {} eigenpairs, more than k_process = {}",
+                self.refine.k_needed(),
+                self.k_process
+            ));
+        }
         let w = [self.w_descr, self.w_lap, self.w_dcomm, self.w_orient];
         if w.iter().any(|x| !x.is_finite() || *x < 0.0) || w.iter().sum::<f64>() <= 0.0 {
             return bad(format!(
@@ -174,6 +234,8 @@ impl MatchParams {
 /// One shape after the per-shape stages: reusable across pairs.
 #[derive(Debug, Clone)]
 pub struct PreparedShape {
+    /// Vertex positions (for sub-sampled refinement).
+    pub vertices: Vec<[f64; 3]>,
     /// Oriented triangles (for the orientation operators).
     pub faces: Vec<[usize; 3]>,
     /// The eigenbasis (`k_process` pairs).
@@ -196,6 +258,7 @@ pub fn prepare(mesh: &TriMesh, params: &MatchParams) -> Result<PreparedShape, Ma
     })?;
     let area = out.basis.mass.iter().sum();
     Ok(PreparedShape {
+        vertices: mesh.vertices().to_vec(),
         faces: mesh.faces().to_vec(),
         basis: out.basis,
         area,
@@ -216,6 +279,8 @@ pub struct MatchTimes {
     pub solve: f64,
     /// Conversion to the point map.
     pub point_map: f64,
+    /// Refinement (0 without).
+    pub refine: f64,
     /// Sum of all stages.
     pub total: f64,
 }
@@ -223,11 +288,17 @@ pub struct MatchTimes {
 /// The result of the pipeline.
 #[derive(Debug, Clone)]
 pub struct MatchResult {
-    /// `T_AB`: for every source vertex, a target vertex (0-based).
+    /// `T_AB`: for every source vertex, a target vertex (0-based); refined
+    /// when a refinement ran.
     pub t_ab: Vec<usize>,
-    /// `C_BA` (k x k): coefficients on B to coefficients on A.
+    /// `C_BA`: coefficients on B to coefficients on A (k x k, or the
+    /// refinement's final size).
     pub c_ba: DMatrix<f64>,
-    /// Structural measures of `C_BA`.
+    /// The initial point map, before refinement.
+    pub t_ab_init: Vec<usize>,
+    /// The refinement report, when one ran.
+    pub refine: Option<RefineReport>,
+    /// Structural measures of the initial `C_BA`.
     pub metrics: solve::FmapMetrics,
     /// Energy terms at the solution, unweighted `[descr, lap, dcomm, orient]`.
     pub energy_terms: [f64; 4],
@@ -394,14 +465,58 @@ pub fn match_prepared(
     times.point_map = t.elapsed().as_secs_f64();
     times.total = times.descriptors + times.operators + times.solve + times.point_map;
     let metrics = solve::fmap_metrics(&c_ba, &sb.eigenvalues, &sa.eigenvalues)?;
-    Ok(MatchResult {
+    let mut out = MatchResult {
+        t_ab_init: t_ab.clone(),
         t_ab,
         c_ba,
+        refine: None,
         metrics,
         energy_terms,
         energy: energy_value,
         times,
-    })
+    };
+    match &params.refine {
+        Refinement::None => {}
+        Refinement::Icp(icp) => {
+            let icp = refine::Icp {
+                adjoint: icp.adjoint || params.adjoint,
+                ..*icp
+            };
+            refine_result(&mut out, a, b, &icp)?;
+        }
+        Refinement::ZoomOut { zoomout, samples } => {
+            let mut zo = zoomout.clone();
+            zo.adjoint |= params.adjoint;
+            zo.subsample = samples.map(|m| refine::Subsample {
+                a: refine::farthest_point_sampling(&b.vertices, m, 0),
+                b: refine::farthest_point_sampling(&a.vertices, m, 0),
+            });
+            refine_result(&mut out, a, b, &zo)?;
+        }
+    }
+    Ok(out)
+}
+
+/// Refines a pipeline result in place with any [`Refiner`]: `C_BA` (B's
+/// functions to A's) is refined between the bases of `b` and `a`, and the
+/// point map `T_AB` is the refiner's output. The unrefined map stays in
+/// `t_ab_init`; the time goes to `times.refine` (and `times.total`).
+pub fn refine_result(
+    out: &mut MatchResult,
+    a: &PreparedShape,
+    b: &PreparedShape,
+    refiner: &dyn Refiner,
+) -> Result<(), MatchError> {
+    let t = Instant::now();
+    // In the refiner's names: its "A" is our B (source of C_BA), its "B"
+    // is our A, and its T_BA is our T_AB.
+    let refined = refiner.refine(&out.c_ba, &b.basis, &a.basis)?;
+    out.c_ba = refined.c_ab;
+    out.t_ab = refined.t_ba;
+    out.refine = Some(refined.report);
+    out.times.refine = t.elapsed().as_secs_f64();
+    out.times.total += out.times.refine;
+    Ok(())
 }
 
 /// What the energy needs of one shape, as plain arrays (so bases and

@@ -303,6 +303,32 @@ fn match_writes_a_one_based_map_and_reports_stages() {
     assert_eq!(out.status.code(), Some(2));
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("lm.txt:2"), "{err}");
+    // Refinement: ZoomOut to 20 reports its iterations; a malformed
+    // schedule is bad usage.
+    let out = fmaps()
+        .args(["match", &s(&mesh), &s(&mesh), "--json"])
+        .args(["--k", "12", "--k-process", "20", "--n-descr", "30"])
+        .args(["--zoomout", "8:20:4"])
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(v["refine"]["method"], "zoomout 8:20:4");
+    assert_eq!(v["refine"]["iterations"], 3);
+    assert_eq!(v["refine"]["final_k"], 20);
+    for bad in ["8:20", "0:20:1", "30:20:1", "8:20:x", "20:40:5"] {
+        let out = fmaps()
+            .args(["match", &s(&mesh), &s(&mesh), "--k", "12", "--zoomout", bad])
+            .output()
+            .unwrap();
+        assert_eq!(out.status.code(), Some(2), "--zoomout {bad}");
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(err.contains("--zoomout"), "{err}");
+    }
     // k larger than the computed basis: bad usage, exit 2.
     let out = fmaps()
         .args(["match", &s(&mesh), &s(&mesh), "--k", "300"])

@@ -2,7 +2,7 @@
 
 use fmaps::mesh_io::TriMesh;
 use fmaps::mesh_io::generate::icosphere;
-use fmaps::pipeline::{MatchError, MatchParams, match_shapes};
+use fmaps::pipeline::{MatchError, MatchParams, Refinement, match_shapes};
 
 /// An ellipsoid with two off-axis bumps: no symmetry left.
 fn blob() -> TriMesh {
@@ -54,6 +54,29 @@ fn a_permuted_copy_is_matched_to_the_true_vertices() {
     assert!(r.metrics.orthonormality < 0.5, "{:?}", r.metrics);
     assert!(r.metrics.laplacian_commutativity < 0.05, "{:?}", r.metrics);
     assert_eq!(r.c_ba.shape(), (20, 20));
+    assert_eq!(r.t_ab_init, r.t_ab);
+
+    // ZoomOut 10 -> 40 (from the 10 x 10 block) and ICP keep or improve it,
+    // and the refined ZoomOut map is exact on this isometry.
+    for refine in [
+        Refinement::zoomout(10, 40, 5),
+        Refinement::Icp(fmaps::refine::Icp::default()),
+    ] {
+        let params = MatchParams {
+            refine: refine.clone(),
+            ..small_params()
+        };
+        let r = match_shapes(&a, &b, &params).unwrap();
+        let refined = (0..n).filter(|&x| r.t_ab[x] == inv[x]).count();
+        assert!(refined >= exact, "{refine:?}: {refined} vs {exact}");
+        let report = r.refine.expect("refinement ran");
+        assert!(report.nn_searches >= 1);
+        if let Refinement::ZoomOut { .. } = refine {
+            assert_eq!(refined, n);
+            assert_eq!(r.c_ba.shape(), (40, 40));
+            assert_eq!(report.iterations.len(), 6);
+        }
+    }
 }
 
 #[test]

@@ -1,0 +1,211 @@
+//! Refinement of functional maps, part of fmaps.
+//!
+//! A functional map `C_AB` (k_B x k_A, coefficients on A to coefficients
+//! on B) computed from descriptors is noisy; the refiners here alternate
+//! between the point map it induces and the functional map that point map
+//! induces:
+//!
+//! - [`Icp`]: ICP in the spectral domain (Ovsjanikov et al. 2012, §6.1):
+//!   `T_BA = NN(C)`, `C ← Φ_Bᵀ M_B Π_BA Φ_A`, then the nearest orthonormal
+//!   matrix `U Vᵀ` (orthogonal Procrustes). It stops early, with the same
+//!   result, once the point map repeats (a fixed point).
+//! - [`ZoomOut`] (Melzi et al., "ZoomOut: spectral upsampling for efficient
+//!   shape correspondence", SIGGRAPH Asia 2019): the same alternation while
+//!   the basis grows from k_start to k_final by `step`; with the common
+//!   options (adjoint conversion, sub-sampled iterations as in the paper's
+//!   fast variant, a bijective variant that refines both directions).
+//!
+//! Both implement [`Refiner`], so a pipeline swaps one for the other (or
+//! for its own) through a trait object. Every nearest-neighbour search is
+//! exact ([`fmaps_solve::nearest_rows`]), so the results are deterministic
+//! and independent of the thread count.
+//!
+//! ```
+//! use fmaps_refine::{Refiner, ZoomOut};
+//! # use fmaps_eigensolve::{EigenProblem, EigenSolver, NativeSolver};
+//! # use fmaps_laplacian::{cotan_laplacian, LaplacianParams};
+//! # let mesh = fmaps_mesh_io::generate::torus(2.0, 0.7, 24, 11);
+//! # let op = cotan_laplacian(&mesh, &LaplacianParams::default());
+//! # let basis = NativeSolver::default().solve(&EigenProblem::new(op.stiffness.view(), &op.mass)?, 40)?;
+//! // Refine the identity functional map of a shape to itself, from a 10 x 10
+//! // block up to 40 x 40: the map stays the identity.
+//! let c = nalgebra::DMatrix::<f64>::identity(10, 10);
+//! let zo = ZoomOut { k_start: 10, k_final: 40, step: 5, ..ZoomOut::default() };
+//! let out = zo.refine(&c, &basis, &basis)?;
+//! assert_eq!(out.c_ab.shape(), (40, 40));
+//! assert!(out.t_ba.iter().enumerate().all(|(y, &x)| x == y));
+//! println!("{}", out.report);
+//! # Ok::<(), Box<dyn std::error::Error>>(())
+//! ```
+#![deny(missing_docs)]
+
+mod icp;
+mod linalg;
+mod sampling;
+mod zoomout;
+
+use std::fmt;
+
+use fmaps_eigensolve::SpectralBasis;
+use nalgebra::DMatrix;
+
+pub use icp::Icp;
+pub use sampling::farthest_point_sampling;
+pub use zoomout::{Subsample, ZoomOut};
+
+/// Errors of this crate.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[non_exhaustive]
+pub enum Error {
+    /// A basis has fewer eigenpairs than the refinement needs.
+    #[error("shape {shape}: the refinement needs {needed} eigenpairs, the basis has {available}")]
+    NotEnoughEigenpairs {
+        /// "A" or "B".
+        shape: &'static str,
+        /// Eigenpairs needed.
+        needed: usize,
+        /// Eigenpairs available.
+        available: usize,
+    },
+    /// A parameter is out of range.
+    #[error("invalid refinement parameter: {0}")]
+    InvalidParameter(String),
+    /// A sub-sample index is out of range.
+    #[error(
+        "sub-sample of shape {shape}: entry {at} is vertex {index}, but the shape has {n} vertices"
+    )]
+    SampleOutOfRange {
+        /// "A" or "B".
+        shape: &'static str,
+        /// Position in the sample list.
+        at: usize,
+        /// The index.
+        index: usize,
+        /// Vertices of the shape.
+        n: usize,
+    },
+    /// The least-squares fit on a sub-sample is singular (too few or
+    /// degenerate samples for the basis size).
+    #[error(
+        "the sub-sampled basis of shape B ({samples} rows, {k} columns) is rank deficient; use more samples"
+    )]
+    SingularSample {
+        /// Sample rows.
+        samples: usize,
+        /// Basis columns.
+        k: usize,
+    },
+    /// A conversion failed (sizes).
+    #[error(transparent)]
+    Solve(#[from] fmaps_solve::Error),
+}
+
+/// Result alias of this crate.
+pub type Result<T, E = Error> = std::result::Result<T, E>;
+
+/// A refined functional map and the point map it induces.
+#[derive(Debug, Clone)]
+pub struct Refined {
+    /// The refined `C_AB` (k_B x k_A at the final sizes).
+    pub c_ab: DMatrix<f64>,
+    /// The point map B → A induced by `c_ab` (one A vertex per B vertex,
+    /// all vertices of B, with the refiner's conversion).
+    pub t_ba: Vec<usize>,
+    /// What happened.
+    pub report: RefineReport,
+}
+
+/// One iteration of a refinement.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Iteration {
+    /// Basis sizes of the functional map this iteration produced (k_A, k_B).
+    pub k: (usize, usize),
+    /// Query points (vertices of B, or the samples of B) whose image under
+    /// the point map this iteration computed differs from the point map
+    /// before it (for the first ZoomOut iteration: all of them).
+    pub changed: usize,
+    /// Wall-clock seconds of the iteration.
+    pub seconds: f64,
+}
+
+/// The convergence and iteration report of a refinement.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RefineReport {
+    /// The refiner's name with its parameters, e.g. `zoomout 50:150:5`.
+    pub method: String,
+    /// Per iteration.
+    pub iterations: Vec<Iteration>,
+    /// For ICP: the point map reached a fixed point before the iteration
+    /// limit. For ZoomOut: the final size was reached.
+    pub converged: bool,
+    /// Nearest-neighbour searches performed (the dominant cost).
+    pub nn_searches: usize,
+    /// Seconds spent in nearest-neighbour searches.
+    pub nn_seconds: f64,
+    /// Total wall-clock seconds.
+    pub seconds: f64,
+}
+
+impl fmt::Display for RefineReport {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let last = self.iterations.last();
+        write!(
+            f,
+            "{}: {} iterations{}, {} NN searches ({:.3} s), {:.3} s",
+            self.method,
+            self.iterations.len(),
+            if self.converged {
+                ""
+            } else {
+                " (not converged)"
+            },
+            self.nn_searches,
+            self.nn_seconds,
+            self.seconds
+        )?;
+        if let Some(it) = last {
+            write!(
+                f,
+                "; final k = {}x{}, last change {} points",
+                it.k.1, it.k.0, it.changed
+            )?;
+        }
+        Ok(())
+    }
+}
+
+/// A refinement of a functional map between two shapes.
+///
+/// `c_ab` is k_B x k_A (its sizes select the leading eigenpairs of each
+/// basis); the result holds the refined map and the point map B → A it
+/// induces.
+pub trait Refiner: Send + Sync {
+    /// A short name with the parameters (for reports and tables).
+    fn name(&self) -> String;
+
+    /// Refines `c_ab`.
+    fn refine(
+        &self,
+        c_ab: &DMatrix<f64>,
+        basis_a: &SpectralBasis,
+        basis_b: &SpectralBasis,
+    ) -> Result<Refined>;
+}
+
+fn check_k(basis: &SpectralBasis, shape: &'static str, needed: usize) -> Result<()> {
+    if basis.k() < needed {
+        return Err(Error::NotEnoughEigenpairs {
+            shape,
+            needed,
+            available: basis.k(),
+        });
+    }
+    Ok(())
+}
+
+fn count_changed(prev: Option<&[usize]>, next: &[usize]) -> usize {
+    match prev {
+        Some(p) => p.iter().zip(next).filter(|(a, b)| a != b).count(),
+        None => next.len(),
+    }
+}

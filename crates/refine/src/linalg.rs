@@ -1,0 +1,100 @@
+//! Dense kernels shared by the refiners: the two point-map conversions on
+//! (possibly sub-sampled) bases and the pull-back of a point map, as faer
+//! GEMMs on views of the column-major eigenvector matrices.
+
+use faer::linalg::matmul::matmul;
+use faer::{Accum, MatMut, MatRef, Par};
+use fmaps_solve::nearest_rows;
+use nalgebra::DMatrix;
+
+/// The first `k` columns of a column-major matrix as a faer view.
+pub(crate) fn leading(m: &DMatrix<f64>, k: usize) -> MatRef<'_, f64> {
+    let n = m.nrows();
+    MatRef::from_column_major_slice(&m.as_slice()[..n * k], n, k)
+}
+
+/// `a · b` (or with `b` transposed) into a new nalgebra matrix.
+fn product(a: MatRef<'_, f64>, b: MatRef<'_, f64>) -> DMatrix<f64> {
+    let mut out = DMatrix::<f64>::zeros(a.nrows(), b.ncols());
+    let (r, c) = out.shape();
+    matmul(
+        MatMut::from_column_major_slice_mut(out.as_mut_slice(), r, c),
+        Accum::Replace,
+        a,
+        b,
+        1.0,
+        Par::rayon(0),
+    );
+    out
+}
+
+/// Spectral embeddings of A (data) and B (queries) for the conversion of a
+/// k_B x k_A map: direct `(Φ_A Cᵀ, Φ_B)`, adjoint `(Φ_A, Φ_B C)`.
+/// `phi_a`/`phi_b` hold at least k_A / k_B columns.
+pub(crate) fn point_map(
+    c_ab: &DMatrix<f64>,
+    phi_a: &DMatrix<f64>,
+    phi_b: &DMatrix<f64>,
+    adjoint: bool,
+) -> Vec<usize> {
+    let (kb, ka) = c_ab.shape();
+    let c = MatRef::from_column_major_slice(c_ab.as_slice(), kb, ka);
+    let (data, queries) = if adjoint {
+        (
+            copy(leading(phi_a, ka)),
+            product(leading(phi_b, kb), c), // n_B x k_A
+        )
+    } else {
+        (
+            product(leading(phi_a, ka), c.transpose()), // n_A x k_B
+            copy(leading(phi_b, kb)),
+        )
+    };
+    nearest_rows(&data, &queries)
+}
+
+fn copy(m: MatRef<'_, f64>) -> DMatrix<f64> {
+    DMatrix::from_fn(m.nrows(), m.ncols(), |i, j| m[(i, j)])
+}
+
+/// `C_AB = Φ_Bᵀ M_B Π_BA Φ_A` on the first `ka`/`kb` columns (k_B x k_A).
+pub(crate) fn pullback(
+    t_ba: &[usize],
+    phi_a: &DMatrix<f64>,
+    ka: usize,
+    phi_b: &DMatrix<f64>,
+    kb: usize,
+    mass_b: &[f64],
+) -> DMatrix<f64> {
+    let nb = t_ba.len();
+    let weighted = DMatrix::from_fn(nb, ka, |y, j| mass_b[y] * phi_a[(t_ba[y], j)]);
+    product(leading(phi_b, kb).transpose(), leading(&weighted, ka))
+}
+
+/// `Φ_B[:, :kb]ᵀ Y` for the least-squares pull-back on samples.
+pub(crate) fn gather_rhs(
+    t_ba: &[usize],
+    phi_a: &DMatrix<f64>,
+    ka: usize,
+    phi_b: &DMatrix<f64>,
+    kb: usize,
+) -> DMatrix<f64> {
+    let gathered = DMatrix::from_fn(t_ba.len(), ka, |y, j| phi_a[(t_ba[y], j)]);
+    product(leading(phi_b, kb).transpose(), leading(&gathered, ka))
+}
+
+/// `Φᵀ Φ` (k x k).
+pub(crate) fn gram(phi: &DMatrix<f64>) -> DMatrix<f64> {
+    let k = phi.ncols();
+    product(leading(phi, k).transpose(), leading(phi, k))
+}
+
+/// The nearest orthonormal matrix `U Vᵀ` (with the rectangular identity
+/// between them for k_B ≠ k_A): orthogonal Procrustes.
+pub(crate) fn nearest_orthonormal(c: DMatrix<f64>) -> DMatrix<f64> {
+    let (kb, ka) = c.shape();
+    let svd = c.svd(true, true);
+    let (u, vt) = (svd.u.expect("u requested"), svd.v_t.expect("v_t requested"));
+    let r = kb.min(ka);
+    u.columns(0, r) * vt.rows(0, r)
+}

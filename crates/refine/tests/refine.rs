@@ -1,0 +1,357 @@
+//! ICP and ZoomOut on a near-isometric pair with known truth: a bumpy torus
+//! A and B = A stretched by a few percent with its vertices permuted, so
+//! the true map is a permutation and the two bases are independent (signs
+//! and near-degenerate eigenspaces differ).
+
+use fmaps_eigensolve::{EigenProblem, EigenSolver, NativeSolver, SpectralBasis};
+use fmaps_laplacian::{LaplacianParams, cotan_laplacian};
+use fmaps_mesh_io::TriMesh;
+use fmaps_mesh_io::generate::torus;
+use fmaps_refine::{Error, Icp, Refiner, Subsample, ZoomOut, farthest_point_sampling};
+use fmaps_solve::{fmap_from_point_map, point_map_from_fmap};
+use nalgebra::DMatrix;
+
+struct Pair {
+    a: TriMesh,
+    basis_a: SpectralBasis,
+    b: TriMesh,
+    basis_b: SpectralBasis,
+    /// True map B → A.
+    t_ba: Vec<usize>,
+}
+
+fn basis(mesh: &TriMesh, k: usize) -> SpectralBasis {
+    let op = cotan_laplacian(mesh, &LaplacianParams::default());
+    NativeSolver::default()
+        .solve(
+            &EigenProblem::new(op.stiffness.view(), &op.mass).unwrap(),
+            k,
+        )
+        .unwrap()
+}
+
+/// `deformed`: B is a differently bumped, bent torus (nearly isometric);
+/// otherwise B is A stretched by a few percent, which the low spectrum
+/// does not see (the true map converts exactly).
+fn pair(k: usize, deformed: bool) -> Pair {
+    let (mut v, f) = torus(2.0, 0.8, 44, 18).into_parts();
+    for (i, p) in v.iter_mut().enumerate() {
+        let s = 1.0 + 0.08 * ((i * 31 % 17) as f64 / 17.0 - 0.5);
+        *p = [p[0] * s, p[1] * s * 1.1, p[2] * (2.0 - s)];
+    }
+    let a = TriMesh::new(v.clone(), f.clone()).unwrap();
+    let n = v.len();
+    // perm[new] = old, a fixed pseudo-random permutation.
+    let mut perm: Vec<usize> = (0..n).collect();
+    let mut state = 12345u64;
+    for i in (1..n).rev() {
+        state = state
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        perm.swap(i, (state >> 33) as usize % (i + 1));
+    }
+    let mut inv = vec![0; n];
+    for (new, &old) in perm.iter().enumerate() {
+        inv[old] = new;
+    }
+    // B: the plain torus with other bumps and a bend, so the shapes are
+    // only nearly isometric.
+    let (v0, _) = torus(2.0, 0.8, 44, 18).into_parts();
+    let vb: Vec<[f64; 3]> = perm
+        .iter()
+        .map(|&o| {
+            if !deformed {
+                return [v[o][0] * 1.04, v[o][1], v[o][2] * 0.97];
+            }
+            let s = 1.0 + 0.1 * ((o * 37 % 19) as f64 / 19.0 - 0.5);
+            let p = v0[o];
+            [
+                p[0] * s * 1.05,
+                p[1] * s,
+                p[2] * (2.0 - s) + 0.15 * p[0] * p[0],
+            ]
+        })
+        .collect();
+    let fb: Vec<[usize; 3]> = f
+        .iter()
+        .map(|t| [inv[t[0]], inv[t[1]], inv[t[2]]])
+        .collect();
+    let b = TriMesh::new(vb, fb).unwrap();
+    Pair {
+        basis_a: basis(&a, k),
+        basis_b: basis(&b, k),
+        a,
+        b,
+        t_ba: perm,
+    }
+}
+
+/// Mean Euclidean distance on A between the predicted and the true image
+/// of every vertex of B.
+fn error(p: &Pair, t_ba: &[usize]) -> f64 {
+    let va = p.a.vertices();
+    let s: f64 = t_ba
+        .iter()
+        .zip(&p.t_ba)
+        .map(|(&x, &y)| {
+            let (u, w) = (va[x], va[y]);
+            ((u[0] - w[0]).powi(2) + (u[1] - w[1]).powi(2) + (u[2] - w[2]).powi(2)).sqrt()
+        })
+        .sum();
+    s / t_ba.len() as f64
+}
+
+fn true_fmap(p: &Pair, k: usize) -> DMatrix<f64> {
+    let c = fmap_from_point_map(&p.t_ba, &p.basis_a, &p.basis_b).unwrap();
+    c.view((0, 0), (k, k)).into_owned()
+}
+
+fn noisy(c: &DMatrix<f64>, sigma: f64, seed: u64) -> DMatrix<f64> {
+    let mut state = seed;
+    c.map(|v| {
+        state = state
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        let u = (state >> 11) as f64 / (1u64 << 53) as f64;
+        v + sigma * (2.0 * u - 1.0)
+    })
+}
+
+#[test]
+fn an_exact_map_stays_exact() {
+    let p = pair(60, false);
+    let c = true_fmap(&p, 60);
+    assert_eq!(
+        point_map_from_fmap(&c, &p.basis_a, &p.basis_b).unwrap(),
+        p.t_ba
+    );
+    let icp = Icp::default().refine(&c, &p.basis_a, &p.basis_b).unwrap();
+    assert_eq!(icp.t_ba, p.t_ba);
+    assert!(icp.report.converged, "{}", icp.report);
+    let zo = ZoomOut {
+        k_start: 20,
+        k_final: 60,
+        step: 4,
+        ..ZoomOut::default()
+    }
+    .refine(&c, &p.basis_a, &p.basis_b)
+    .unwrap();
+    assert_eq!(zo.t_ba, p.t_ba);
+    assert_eq!(zo.c_ab.shape(), (60, 60));
+    // The refined map is the true one at k = 60.
+    assert!((&zo.c_ab - &c).amax() < 1e-12);
+    assert_eq!(zo.report.iterations.len(), 10);
+    assert_eq!(zo.report.nn_searches, 11);
+}
+
+#[test]
+fn zoomout_recovers_a_low_rank_truncation() {
+    // The true map seen through 6 eigenfunctions converts to a poor point
+    // map; ZoomOut to 60 recovers most of it.
+    let p = pair(60, true);
+    let c6 = true_fmap(&p, 6);
+    let before = error(
+        &p,
+        &point_map_from_fmap(&c6, &p.basis_a, &p.basis_b).unwrap(),
+    );
+    let zo = ZoomOut {
+        k_start: 6,
+        k_final: 60,
+        step: 2,
+        ..ZoomOut::default()
+    }
+    .refine(&c6, &p.basis_a, &p.basis_b)
+    .unwrap();
+    let after = error(&p, &zo.t_ba);
+    assert!(after < 0.2 * before, "before {before}, after {after}");
+    // The iterations shrink the changes of the point map.
+    let ch: Vec<usize> = zo.report.iterations.iter().map(|i| i.changed).collect();
+    assert!(ch.last().unwrap() * 5 < ch[1], "{ch:?}");
+}
+
+#[test]
+fn refiners_reduce_the_error_of_a_noisy_map() {
+    let p = pair(60, true);
+    let c = noisy(&true_fmap(&p, 20), 0.15, 7);
+    let before = error(
+        &p,
+        &point_map_from_fmap(&c, &p.basis_a, &p.basis_b).unwrap(),
+    );
+    let icp = Icp::default().refine(&c, &p.basis_a, &p.basis_b).unwrap();
+    let e_icp = error(&p, &icp.t_ba);
+    // ICP returns an orthonormal map.
+    let ctc = icp.c_ab.tr_mul(&icp.c_ab);
+    assert!((ctc - DMatrix::identity(20, 20)).amax() < 1e-10);
+    let zo = |z: ZoomOut| error(&p, &z.refine(&c, &p.basis_a, &p.basis_b).unwrap().t_ba);
+    let base = ZoomOut {
+        k_start: 20,
+        k_final: 60,
+        step: 2,
+        ..ZoomOut::default()
+    };
+    let e_zo = zo(base.clone());
+    let e_adj = zo(ZoomOut {
+        adjoint: true,
+        ..base.clone()
+    });
+    let e_bij = zo(ZoomOut {
+        bijective: true,
+        ..base.clone()
+    });
+    for (name, e) in [
+        ("icp", e_icp),
+        ("zoomout", e_zo),
+        ("adjoint", e_adj),
+        ("bijective", e_bij),
+    ] {
+        assert!(e < 0.5 * before, "{name}: before {before}, after {e}");
+    }
+    assert!(e_zo < e_icp, "zoomout {e_zo} vs icp {e_icp}");
+}
+
+#[test]
+fn subsampled_zoomout_is_close_to_the_full_one() {
+    let p = pair(60, true);
+    let c = noisy(&true_fmap(&p, 20), 0.15, 7);
+    let before = error(
+        &p,
+        &point_map_from_fmap(&c, &p.basis_a, &p.basis_b).unwrap(),
+    );
+    let base = ZoomOut {
+        k_start: 20,
+        k_final: 60,
+        step: 2,
+        ..ZoomOut::default()
+    };
+    let full = error(&p, &base.refine(&c, &p.basis_a, &p.basis_b).unwrap().t_ba);
+    let sub = Subsample {
+        a: farthest_point_sampling(p.a.vertices(), 500, 0),
+        b: farthest_point_sampling(p.b.vertices(), 500, 0),
+    };
+    let z = ZoomOut {
+        subsample: Some(sub.clone()),
+        ..base.clone()
+    };
+    let out = z.refine(&c, &p.basis_a, &p.basis_b).unwrap();
+    assert_eq!(out.t_ba.len(), p.b.vertices().len());
+    let e = error(&p, &out.t_ba);
+    assert!(
+        e < 0.5 * before && e < 2.0 * full + 0.02,
+        "before {before}, full {full}, sub {e}"
+    );
+    // Too few samples for k = 60 is an error, not a singular solve.
+    let few = Subsample {
+        a: sub.a.clone(),
+        b: sub.b[..40].to_vec(),
+    };
+    let err = ZoomOut {
+        subsample: Some(few),
+        ..base.clone()
+    }
+    .refine(&c, &p.basis_a, &p.basis_b)
+    .unwrap_err();
+    assert!(matches!(err, Error::InvalidParameter(_)), "{err}");
+    let bad = Subsample {
+        a: vec![0, 99_999],
+        b: sub.b,
+    };
+    let err = ZoomOut {
+        subsample: Some(bad),
+        ..base
+    }
+    .refine(&c, &p.basis_a, &p.basis_b)
+    .unwrap_err();
+    assert_eq!(
+        err,
+        Error::SampleOutOfRange {
+            shape: "A",
+            at: 1,
+            index: 99_999,
+            n: p.a.vertices().len()
+        }
+    );
+}
+
+#[test]
+fn results_do_not_depend_on_the_thread_count() {
+    let p = pair(40, true);
+    let c = noisy(&true_fmap(&p, 12), 0.2, 3);
+    let z = ZoomOut {
+        k_start: 12,
+        k_final: 40,
+        step: 3,
+        bijective: true,
+        ..ZoomOut::default()
+    };
+    let run = |threads: usize| {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap();
+        pool.install(|| z.refine(&c, &p.basis_a, &p.basis_b).unwrap())
+    };
+    let (one, two) = (run(1), run(2));
+    assert_eq!(one.t_ba, two.t_ba);
+    assert_eq!(one.c_ab, two.c_ab);
+    let again = run(2);
+    assert_eq!(again.c_ab, two.c_ab);
+}
+
+#[test]
+fn parameter_errors() {
+    let p = pair(30, true);
+    let c = true_fmap(&p, 20);
+    let r = |z: ZoomOut| z.refine(&c, &p.basis_a, &p.basis_b).unwrap_err();
+    assert_eq!(
+        r(ZoomOut {
+            k_start: 20,
+            k_final: 50,
+            step: 5,
+            ..ZoomOut::default()
+        }),
+        Error::NotEnoughEigenpairs {
+            shape: "A",
+            needed: 50,
+            available: 30
+        }
+    );
+    assert!(matches!(
+        r(ZoomOut {
+            k_start: 25,
+            k_final: 30,
+            step: 5,
+            ..ZoomOut::default()
+        }),
+        Error::InvalidParameter(_)
+    ));
+    assert!(matches!(
+        r(ZoomOut {
+            k_start: 10,
+            k_final: 30,
+            step: 0,
+            ..ZoomOut::default()
+        }),
+        Error::InvalidParameter(_)
+    ));
+    assert_eq!(
+        ZoomOut {
+            k_start: 10,
+            k_final: 21,
+            step: 5,
+            ..ZoomOut::default()
+        }
+        .schedule(),
+        vec![15, 20, 21]
+    );
+    let big = DMatrix::<f64>::zeros(40, 40);
+    assert_eq!(
+        Icp::default()
+            .refine(&big, &p.basis_a, &p.basis_b)
+            .unwrap_err(),
+        Error::NotEnoughEigenpairs {
+            shape: "A",
+            needed: 40,
+            available: 30
+        }
+    );
+}
