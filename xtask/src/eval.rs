@@ -47,7 +47,8 @@ pub struct Args {
 enum MapSource {
     /// A method of the dataset's `maps/*.zip`.
     Published(fmaps::eval::PublishedMaps),
-    /// `fmaps-init`: the fmaps pipeline, run here.
+    /// `fmaps-init`, `fmaps-icp`, `fmaps-zoomout[:START:FINAL:STEP]`: the
+    /// fmaps pipeline, run here.
     Pipeline(Box<PipelineCache>),
     /// pyFM's maps from `pyfm_pipeline.py` with its per-pair timings.
     PyFm {
@@ -64,9 +65,13 @@ struct PipelineCache {
 
 impl MapSource {
     fn open(c: &Collection, method: &str, peer_dir: &std::path::Path) -> anyhow::Result<MapSource> {
-        if method == "fmaps-init" {
+        if let Some(refine) = pipeline_method(method)? {
             return Ok(MapSource::Pipeline(Box::new(PipelineCache {
-                params: fmaps::MatchParams::default(),
+                params: fmaps::MatchParams {
+                    k_process: 200.max(refine.k_needed()),
+                    refine,
+                    ..fmaps::MatchParams::default()
+                },
                 shapes: HashMap::new(),
             })));
         }
@@ -125,6 +130,35 @@ impl MapSource {
     }
 }
 
+/// The refinement of an fmaps pipeline method, `None` for other methods:
+/// `fmaps-init` (none), `fmaps-icp` (10 iterations), `fmaps-zoomout`
+/// (50 -> 150 step 5, pyFM's schedule in `pyfm_pipeline.py`) or
+/// `fmaps-zoomout:START:FINAL:STEP`.
+fn pipeline_method(method: &str) -> anyhow::Result<Option<fmaps::pipeline::Refinement>> {
+    use fmaps::pipeline::Refinement;
+    Ok(Some(match method {
+        "fmaps-init" => Refinement::None,
+        "fmaps-icp" => Refinement::Icp(fmaps::refine::Icp::default()),
+        "fmaps-zoomout" => Refinement::zoomout(50, 150, 5),
+        m => match m.strip_prefix("fmaps-zoomout:") {
+            Some(spec) => {
+                let v: Vec<usize> = spec
+                    .split(':')
+                    .map(str::parse)
+                    .collect::<Result<_, _>>()
+                    .with_context(|| {
+                        format!("method {m}: expected fmaps-zoomout:START:FINAL:STEP")
+                    })?;
+                let [a, b, c] = v[..] else {
+                    bail!("method {m}: expected fmaps-zoomout:START:FINAL:STEP");
+                };
+                Refinement::zoomout(a, b, c)
+            }
+            None => return Ok(None),
+        },
+    }))
+}
+
 /// Per-pair seconds of one pyFM stage's map, counted like ours: loading,
 /// Laplacians and eigenbases (0 for shapes cached from earlier pairs),
 /// descriptors, the fit and the conversion.
@@ -138,7 +172,11 @@ fn pyfm_seconds(
     };
     let keys: &[&str] = match stage {
         "fm" => &["fit", "p2p"],
+        "fm_icp" => &["fit", "p2p", "icp"],
+        "fm_zoomout" => &["fit", "p2p", "zoomout"],
         "fm_orient" => &["fit_orient", "p2p_orient"],
+        "fm_orient_icp" => &["fit_orient", "p2p_orient", "icp_orient"],
+        "fm_orient_zoomout" => &["fit_orient", "p2p_orient", "zoomout_orient"],
         _ => return Ok(out),
     };
     for line in text.lines() {
@@ -264,7 +302,7 @@ pub fn eval(args: &Args) -> anyhow::Result<()> {
         }
     }
     println!(
-        "{:<16} {:<16} {:>6} {:>10} {:>10} {:>7} {:>9} {:>9} {:>8}  geodesics",
+        "{:<16} {:<24} {:>6} {:>10} {:>10} {:>7} {:>9} {:>9} {:>8}  geodesics",
         "collection",
         "method",
         "pairs",
@@ -277,7 +315,7 @@ pub fn eval(args: &Args) -> anyhow::Result<()> {
     );
     for r in &rows {
         println!(
-            "{:<16} {:<16} {:>6} {:>10.3} {:>10.3} {:>7.4} {:>9.4} {:>9} {:>8.2}  {}",
+            "{:<16} {:<24} {:>6} {:>10.3} {:>10.3} {:>7.4} {:>9.4} {:>9} {:>8.2}  {}",
             r["collection"].as_str().unwrap_or(""),
             r["method"].as_str().unwrap_or(""),
             format!(
@@ -310,11 +348,17 @@ pub fn eval(args: &Args) -> anyhow::Result<()> {
                 .find(|r| r["collection"] == cname.as_str() && r["method"] == m)
                 .and_then(|r| r["map_seconds_per_pair"].as_f64())
         };
-        if let (Some(ours), Some(peer)) = (time("fmaps-init"), time("pyfm:fm_orient")) {
-            println!(
-                "{cname}: fmaps-init computes a map {:.1}x faster than pyFM's same pipeline ({ours:.3} s vs {peer:.3} s per pair)",
-                peer / ours
-            );
+        for (ours_m, peer_m) in [
+            ("fmaps-init", "pyfm:fm_orient"),
+            ("fmaps-icp", "pyfm:fm_orient_icp"),
+            ("fmaps-zoomout", "pyfm:fm_orient_zoomout"),
+        ] {
+            if let (Some(ours), Some(peer)) = (time(ours_m), time(peer_m)) {
+                println!(
+                    "{cname}: {ours_m} computes a map {:.1}x faster than pyFM's same pipeline {peer_m} ({ours:.3} s vs {peer:.3} s per pair)",
+                    peer / ours
+                );
+            }
         }
     }
     for cname in &collections {

@@ -11,6 +11,7 @@
 
 mod bench;
 mod bench_match;
+mod bench_refine;
 mod descriptor_check;
 mod eval;
 mod figures;
@@ -32,7 +33,7 @@ struct Cli {
 enum Command {
     /// Benchmark the Laplacian and the eigensolvers against SciPy.
     Bench(bench::Args),
-    /// The benchmark table over test pairs (published maps, fmaps-init, pyfm:<stage>).
+    /// The benchmark table over test pairs (published maps, fmaps-init, fmaps-icp, fmaps-zoomout[:START:FINAL:STEP], pyfm:<stage>).
     Eval(eval::Args),
     /// Compare HKS/WKS with pyFM's (needs the Python peers).
     DescriptorCheck(descriptor_check::Args),
@@ -42,6 +43,8 @@ enum Command {
     FitCheck(fit_check::Args),
     /// `fmaps match` stage by stage against pyFM's same pipeline.
     BenchMatch(bench_match::Args),
+    /// Nearest neighbours, ICP and ZoomOut against scikit-learn, SciPy and pyFM on one pair.
+    BenchRefine(bench_refine::Args),
     /// The seed paper's Figure 8 curve and Figure 1 heat maps, into docs/.
     Figures(figures::Args),
 }
@@ -55,5 +58,6 @@ fn main() -> anyhow::Result<()> {
         Command::FitCheck(a) => fit_check::fit_check(&a),
         Command::Figures(a) => figures::figures(&a),
         Command::BenchMatch(a) => bench_match::bench_match(&a),
+        Command::BenchRefine(a) => bench_refine::bench_refine(&a),
     }
 }

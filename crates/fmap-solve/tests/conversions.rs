@@ -77,16 +77,43 @@ fn nearest_rows_matches_a_naive_search() {
         // of the other candidates, resolved by the direct re-check.
         let r9 = x.row(9).map(|v| v + 1e-13);
         q.row_mut(1).copy_from(&r9);
-        let got = nearest_rows(&x, &q);
-        for (i, &g) in got.iter().enumerate() {
-            let dist = |k: usize| (x.row(k) - q.row(i)).norm_squared();
-            let best = (0..nx)
-                .min_by(|&a, &b| dist(a).total_cmp(&dist(b)).then(a.cmp(&b)))
-                .unwrap();
-            assert_eq!(g, best, "d={d} query {i}");
+        for strategy in [NnStrategy::Auto, NnStrategy::Brute, NnStrategy::Tree] {
+            let got = nearest_rows_with(&x, &q, strategy);
+            for (i, &g) in got.iter().enumerate() {
+                let dist = |k: usize| (x.row(k) - q.row(i)).norm_squared();
+                let best = (0..nx)
+                    .min_by(|&a, &b| dist(a).total_cmp(&dist(b)).then(a.cmp(&b)))
+                    .unwrap();
+                assert_eq!(g, best, "{strategy:?} d={d} query {i}");
+            }
+            assert_eq!(got[0], 2);
+            assert_eq!(got[1], 9);
         }
-        assert_eq!(got[0], 2);
-        assert_eq!(got[1], 9);
+    }
+}
+
+/// Spectral embeddings of a surface (the case the tree is for: points on a
+/// 2-manifold in R^k, queries near it) and queries far from the data: the
+/// tree and brute force agree exactly, for every query.
+#[test]
+fn tree_search_equals_brute_force_on_spectral_embeddings() {
+    let b = basis(&common::bumpy(48, 20), 40);
+    let n = b.n();
+    for k in [3, 12, 40] {
+        let x = b.eigenvectors.columns(0, k).into_owned();
+        // Queries: every row moved by a smooth perturbation, plus far points.
+        let mut q = DMatrix::from_fn(n, k, |i, j| {
+            x[(i, j)] + 0.02 * ((i * 7 + j * 3) as f64).sin() * x.column(j).amax()
+        });
+        for i in 0..10 {
+            q.row_mut(i).iter_mut().for_each(|v| *v = 3.0 + i as f64);
+        }
+        let brute = nearest_rows_with(&x, &q, NnStrategy::Brute);
+        let tree = nearest_rows_with(&x, &q, NnStrategy::Tree);
+        assert_eq!(brute, tree, "k = {k}");
+        // The unperturbed embedding maps every vertex to itself.
+        let own = nearest_rows_with(&x, &x, NnStrategy::Tree);
+        assert!(own.iter().enumerate().all(|(i, &j)| i == j), "k = {k}");
     }
 }
 
@@ -140,6 +167,7 @@ fn nearest_rows_resolves_below_f32_precision() {
                 }
         });
         assert_eq!(nearest_rows(&x, &q), vec![target]);
+        assert_eq!(nearest_rows_with(&x, &q, NnStrategy::Tree), vec![target]);
     }
 }
 
