@@ -50,6 +50,89 @@ pub struct Args {
     /// Only the nearest-neighbour table.
     #[arg(long)]
     nn_only: bool,
+    /// Instead: ZoomOut 30 -> 200 step 1 on the pair subdivided twice
+    /// (1-to-4 midpoint, ~80k vertices), iterations on SAMPLES farthest
+    /// points per shape, final map on all vertices.
+    #[arg(long)]
+    large: bool,
+    /// Farthest-point samples per shape for `--large`.
+    #[arg(long, default_value_t = 5000)]
+    samples: usize,
+}
+
+/// Peak resident memory of this process (VmHWM), MiB.
+fn peak_mib() -> f64 {
+    std::fs::read_to_string("/proc/self/status")
+        .ok()
+        .and_then(|s| {
+            s.lines()
+                .find(|l| l.starts_with("VmHWM:"))
+                .and_then(|l| l.split_whitespace().nth(1)?.parse::<f64>().ok())
+        })
+        .map_or(f64::NAN, |kb| kb / 1024.0)
+}
+
+/// ZoomOut on the ~80k-vertex subdivided pair.
+fn large(args: &Args, c: &Collection, a: &str, b: &str) -> anyhow::Result<()> {
+    use fmaps::mesh_io::generate::subdivide;
+    use fmaps::refine::{Subsample, farthest_point_sampling};
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(args.threads)
+        .build()?;
+    let ma = subdivide(&subdivide(&c.read_mesh(a)?));
+    let mb = subdivide(&subdivide(&c.read_mesh(b)?));
+    let params = MatchParams::default();
+    let t = Instant::now();
+    let (pa, pb) = pool.install(|| rayon::join(|| prepare(&ma, &params), || prepare(&mb, &params)));
+    let (pa, pb) = (pa?, pb?);
+    let t_spectra = t.elapsed().as_secs_f64();
+    let init = pool.install(|| match_prepared(&pa, &pb, &params))?;
+    let t = Instant::now();
+    let zo = ZoomOut {
+        k_start: 30,
+        k_final: 200,
+        step: 1,
+        subsample: Some(Subsample {
+            a: farthest_point_sampling(&pb.vertices, args.samples, 0),
+            b: farthest_point_sampling(&pa.vertices, args.samples, 0),
+        }),
+        ..ZoomOut::default()
+    };
+    let t_fps = t.elapsed().as_secs_f64();
+    let out = pool.install(|| zo.refine(&init.c_ba, &pb.basis, &pa.basis))?;
+    let t_zoomout = out.report.seconds;
+    println!(
+        "{} {a} -> {b} subdivided twice: {} and {} vertices, {} thread(s)",
+        c.name(),
+        ma.n_vertices(),
+        mb.n_vertices(),
+        args.threads
+    );
+    println!("eigenbases (k = 200, both)   {t_spectra:>8.2} s");
+    println!("initial map (fmaps-init)     {:>8.2} s", init.times.total);
+    println!(
+        "farthest point sampling      {t_fps:>8.2} s ({} per shape)",
+        args.samples
+    );
+    println!(
+        "ZoomOut 30:200:1             {t_zoomout:>8.2} s  ({})",
+        out.report
+    );
+    println!("peak memory (process)        {:>8.0} MiB", peak_mib());
+    // Accuracy on the original vertices (subdivision keeps their indices).
+    let gt = c.ground_truth(a, b, ma.n_vertices(), mb.n_vertices())?;
+    let t = Instant::now();
+    let solver = ExactSolver::new(&mb)?;
+    let params = EvalParams::default();
+    let e_init = evaluate(&mb, &solver, &init.t_ab, &gt, None, &params)?.mean_error;
+    let e_zo = evaluate(&mb, &solver, &out.t_ba, &gt, None, &params)?.mean_error;
+    println!(
+        "mean geodesic error x100 (exact, on the 80k target): init {:.3}, ZoomOut {:.3} ({:.1} s to evaluate)",
+        100.0 * e_init,
+        100.0 * e_zo,
+        t.elapsed().as_secs_f64()
+    );
+    Ok(())
 }
 
 fn median(mut v: Vec<f64>) -> f64 {
@@ -111,6 +194,9 @@ pub fn bench_refine(args: &Args) -> anyhow::Result<()> {
     let Some((a, b)) = pairs.get(args.pair).cloned() else {
         bail!("{} has {} test pairs", args.collection, pairs.len());
     };
+    if args.large {
+        return large(args, &c, &a, &b);
+    }
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(args.threads)
         .build()?;
