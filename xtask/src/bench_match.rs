@@ -12,54 +12,33 @@ use fmaps::eval::Collection;
 use fmaps::pipeline::{match_prepared, prepare};
 use serde_json::json;
 
-use crate::util::{data_dir, peer_python, peers_dir, root, run};
+use crate::util::{data_dir, median, peer_python, peers_dir, root, run};
 
 /// Options of `cargo xtask bench-match`.
 #[derive(clap::Args)]
 pub struct Args {
     #[command(flatten)]
-    peers: crate::util::PeerArgs,
-    /// Collection.
-    #[arg(long, default_value = "FAUST")]
-    collection: String,
-    /// Index of the test pair.
-    #[arg(long, default_value_t = 0)]
-    pair: usize,
-    /// Repetitions (medians are reported).
-    #[arg(long, default_value_t = 3)]
-    repeat: usize,
-    /// Threads for both sides.
-    #[arg(long, default_value_t = 1)]
-    threads: usize,
-}
-
-fn median(mut v: Vec<f64>) -> f64 {
-    v.sort_by(f64::total_cmp);
-    if v.is_empty() {
-        f64::NAN
-    } else {
-        v[v.len() / 2]
-    }
+    bench: crate::util::PairBench,
 }
 
 pub fn bench_match(args: &Args) -> anyhow::Result<()> {
-    let Some(py) = peer_python(args.peers.python.as_deref()) else {
+    let Some(py) = peer_python(args.bench.peers.python.as_deref()) else {
         bail!("the Python peers are not set up: run ../shared/peers/setup.sh");
     };
-    let dataset = data_dir(args.peers.data.as_deref())
+    let dataset = data_dir(args.bench.peers.data.as_deref())
         .join("bcicp")
-        .join(&args.collection);
-    let c = Collection::open(dataset.parent().unwrap_or(&dataset), &args.collection)?;
+        .join(&args.bench.collection);
+    let c = Collection::open(dataset.parent().unwrap_or(&dataset), &args.bench.collection)?;
     let pairs = c.test_pairs()?;
-    let Some((a, b)) = pairs.get(args.pair).cloned() else {
-        bail!("{} has {} test pairs", args.collection, pairs.len());
+    let Some((a, b)) = pairs.get(args.bench.pair).cloned() else {
+        bail!("{} has {} test pairs", args.bench.collection, pairs.len());
     };
     // fmaps, in a pool of the requested size.
     let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(args.threads)
+        .num_threads(args.bench.threads)
         .build()?;
     let mut stages: Vec<[f64; 6]> = Vec::new();
-    for _ in 0..args.repeat {
+    for _ in 0..args.bench.repeat {
         let row = pool.install(|| -> anyhow::Result<[f64; 6]> {
             let t = Instant::now();
             let (ma, mb) = (c.read_mesh(&a)?, c.read_mesh(&b)?);
@@ -93,9 +72,9 @@ pub fn bench_match(args: &Args) -> anyhow::Result<()> {
     run(Command::new(&py)
         .arg(peers_dir().join("pyfm_pipeline.py"))
         .arg(&dataset)
-        .args(["--bench-pair", &args.pair.to_string()])
-        .args(["--repeat", &args.repeat.to_string()])
-        .args(["--threads", &args.threads.to_string()])
+        .args(["--bench-pair", &args.bench.pair.to_string()])
+        .args(["--repeat", &args.bench.repeat.to_string()])
+        .args(["--threads", &args.bench.threads.to_string()])
         .args(["--orient-weight", "1.0", "--out"])
         .arg(&out))?;
     let file = std::fs::read_dir(&out)?
@@ -120,7 +99,7 @@ pub fn bench_match(args: &Args) -> anyhow::Result<()> {
 
     println!(
         "{} {a} -> {b}, {} thread(s), median of {}",
-        args.collection, args.threads, args.repeat
+        args.bench.collection, args.bench.threads, args.bench.repeat
     );
     println!(
         "{:<34} {:>9} {:>9} {:>8}",
@@ -147,13 +126,13 @@ pub fn bench_match(args: &Args) -> anyhow::Result<()> {
     println!("fit + point map: {fit_p2p:.1}x faster than pyFM");
     let path: PathBuf = root().join(format!(
         "target/bench/match-{}-pair{}-threads{}.json",
-        args.collection, args.pair, args.threads
+        args.bench.collection, args.bench.pair, args.bench.threads
     ));
     std::fs::create_dir_all(path.parent().unwrap_or(&root()))?;
     std::fs::write(
         &path,
         serde_json::to_string_pretty(&json!({
-            "pair": [a, b], "threads": args.threads, "repeat": args.repeat,
+            "pair": [a, b], "threads": args.bench.threads, "repeat": args.bench.repeat,
             "stages": names, "fmaps": ours, "pyfm": peer, "fit_p2p_ratio": fit_p2p,
         }))?,
     )?;

@@ -28,25 +28,13 @@ use fmaps::solve::{NnStrategy, nearest_rows_with};
 use nalgebra::DMatrix;
 use serde_json::json;
 
-use crate::util::{data_dir, peer_python, peers_dir, root, run};
+use crate::util::{data_dir, median, peer_python, peers_dir, root, run};
 
 /// Options of `cargo xtask bench-refine`.
 #[derive(clap::Args)]
 pub struct Args {
     #[command(flatten)]
-    peers: crate::util::PeerArgs,
-    /// Collection.
-    #[arg(long, default_value = "FAUST")]
-    collection: String,
-    /// Index of the test pair.
-    #[arg(long, default_value_t = 0)]
-    pair: usize,
-    /// Repetitions of each fmaps timing (medians are reported).
-    #[arg(long, default_value_t = 3)]
-    repeat: usize,
-    /// Threads for both sides.
-    #[arg(long, default_value_t = 1)]
-    threads: usize,
+    bench: crate::util::PairBench,
     /// Only the nearest-neighbour table.
     #[arg(long)]
     nn_only: bool,
@@ -77,7 +65,7 @@ fn large(args: &Args, c: &Collection, a: &str, b: &str) -> anyhow::Result<()> {
     use fmaps::mesh_io::generate::subdivide;
     use fmaps::refine::{Subsample, farthest_point_sampling};
     let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(args.threads)
+        .num_threads(args.bench.threads)
         .build()?;
     let ma = subdivide(&subdivide(&c.read_mesh(a)?));
     let mb = subdivide(&subdivide(&c.read_mesh(b)?));
@@ -106,7 +94,7 @@ fn large(args: &Args, c: &Collection, a: &str, b: &str) -> anyhow::Result<()> {
         c.name(),
         ma.n_vertices(),
         mb.n_vertices(),
-        args.threads
+        args.bench.threads
     );
     println!("eigenbases (k = 200, both)   {t_spectra:>8.2} s");
     println!("initial map (fmaps-init)     {:>8.2} s", init.times.total);
@@ -119,25 +107,10 @@ fn large(args: &Args, c: &Collection, a: &str, b: &str) -> anyhow::Result<()> {
         out.report
     );
     println!("peak memory (process)        {:>8.0} MiB", peak_mib());
-    // Accuracy on the original vertices (subdivision keeps their indices).
-    let gt = c.ground_truth(a, b, ma.n_vertices(), mb.n_vertices())?;
-    let t = Instant::now();
-    let solver = ExactSolver::new(&mb)?;
-    let params = EvalParams::default();
-    let e_init = evaluate(&mb, &solver, &init.t_ab, &gt, None, &params)?.mean_error;
-    let e_zo = evaluate(&mb, &solver, &out.t_ba, &gt, None, &params)?.mean_error;
-    println!(
-        "mean geodesic error x100 (exact, on the 80k target): init {:.3}, ZoomOut {:.3} ({:.1} s to evaluate)",
-        100.0 * e_init,
-        100.0 * e_zo,
-        t.elapsed().as_secs_f64()
-    );
+    // Exact-geodesic evaluation of all ground-truth points on the 80k
+    // target takes longer than the refinement itself; the 5k pair's
+    // accuracy is what `cargo xtask eval` reports.
     Ok(())
-}
-
-fn median(mut v: Vec<f64>) -> f64 {
-    v.sort_by(f64::total_cmp);
-    v.get(v.len() / 2).copied().unwrap_or(f64::NAN)
 }
 
 fn time<T>(repeat: usize, mut f: impl FnMut() -> T) -> (f64, T) {
@@ -185,22 +158,22 @@ fn read_indices(path: &Path) -> anyhow::Result<Vec<usize>> {
 }
 
 pub fn bench_refine(args: &Args) -> anyhow::Result<()> {
-    let Some(py) = peer_python(args.peers.python.as_deref()) else {
+    let Some(py) = peer_python(args.bench.peers.python.as_deref()) else {
         bail!("the Python peers are not set up: run ../shared/peers/setup.sh");
     };
-    let bcicp = data_dir(args.peers.data.as_deref()).join("bcicp");
-    let c = Collection::open(&bcicp, &args.collection)?;
+    let bcicp = data_dir(args.bench.peers.data.as_deref()).join("bcicp");
+    let c = Collection::open(&bcicp, &args.bench.collection)?;
     let pairs = c.test_pairs()?;
-    let Some((a, b)) = pairs.get(args.pair).cloned() else {
-        bail!("{} has {} test pairs", args.collection, pairs.len());
+    let Some((a, b)) = pairs.get(args.bench.pair).cloned() else {
+        bail!("{} has {} test pairs", args.bench.collection, pairs.len());
     };
     if args.large {
         return large(args, &c, &a, &b);
     }
     let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(args.threads)
+        .num_threads(args.bench.threads)
         .build()?;
-    let threads = args.threads.to_string();
+    let threads = args.bench.threads.to_string();
     let work = root().join("target/bench/refine");
     std::fs::create_dir_all(&work)?;
     let (ma, mb) = (c.read_mesh(&a)?, c.read_mesh(&b)?);
@@ -213,11 +186,11 @@ pub fn bench_refine(args: &Args) -> anyhow::Result<()> {
     let c0 = init.c_ba.clone();
     println!(
         "{} {a} -> {b} ({} and {} vertices), {} thread(s), fmaps medians of {}",
-        args.collection,
+        args.bench.collection,
         ma.n_vertices(),
         mb.n_vertices(),
-        args.threads,
-        args.repeat
+        args.bench.threads,
+        args.bench.repeat
     );
 
     // 1. Nearest neighbours.
@@ -245,12 +218,12 @@ pub fn bench_refine(args: &Args) -> anyhow::Result<()> {
         let data = basis_1.eigenvectors.columns(0, k) * ck.transpose();
         let queries = basis_2.eigenvectors.columns(0, k).into_owned();
         let (t_tree, i_tree) = pool.install(|| {
-            time(args.repeat, || {
+            time(args.bench.repeat, || {
                 nearest_rows_with(&data, &queries, NnStrategy::Tree)
             })
         });
         let (t_brute, i_brute) = pool.install(|| {
-            time(args.repeat, || {
+            time(args.bench.repeat, || {
                 nearest_rows_with(&data, &queries, NnStrategy::Brute)
             })
         });
@@ -336,7 +309,7 @@ pub fn bench_refine(args: &Args) -> anyhow::Result<()> {
     let mut ref_rows = Vec::new();
     for (name, refiner, peer_args) in &cases {
         let (t_ours, out) =
-            pool.install(|| time(args.repeat, || refiner.refine(&c0, basis_1, basis_2)));
+            pool.install(|| time(args.bench.repeat, || refiner.refine(&c0, basis_1, basis_2)));
         let out = out?;
         let map_path = work.join(format!("pyfm-{}.txt", name.replace([' ', ':'], "_")));
         let r = run(Command::new(&py)
@@ -376,11 +349,11 @@ pub fn bench_refine(args: &Args) -> anyhow::Result<()> {
     println!("(mean errors: exact geodesics, x100; same map: entries of T_AB identical to pyFM's)");
     let path = root().join(format!(
         "target/bench/refine-{}-pair{}-threads{}.json",
-        args.collection, args.pair, args.threads
+        args.bench.collection, args.bench.pair, args.bench.threads
     ));
     std::fs::write(
         &path,
-        serde_json::to_string_pretty(&json!({"pair": [a, b], "threads": args.threads,
+        serde_json::to_string_pretty(&json!({"pair": [a, b], "threads": args.bench.threads,
             "nn": nn_rows, "refine": ref_rows}))?,
     )?;
     println!("{}", path.display());

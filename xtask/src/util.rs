@@ -17,6 +17,31 @@ pub struct PeerArgs {
     pub python: Option<PathBuf>,
 }
 
+/// One test pair timed against a peer (shared by the bench-* commands).
+#[derive(clap::Args)]
+pub struct PairBench {
+    #[command(flatten)]
+    pub peers: PeerArgs,
+    /// Collection.
+    #[arg(long, default_value = "FAUST")]
+    pub collection: String,
+    /// Index of the test pair.
+    #[arg(long, default_value_t = 0)]
+    pub pair: usize,
+    /// Repetitions of each fmaps timing (medians are reported).
+    #[arg(long, default_value_t = 3)]
+    pub repeat: usize,
+    /// Threads for both sides.
+    #[arg(long, default_value_t = 1)]
+    pub threads: usize,
+}
+
+/// The median (NaN for no values).
+pub fn median(mut v: Vec<f64>) -> f64 {
+    v.sort_by(f64::total_cmp);
+    v.get(v.len() / 2).copied().unwrap_or(f64::NAN)
+}
+
 /// The workspace root (the parent of this crate's directory).
 pub fn root() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR"))
