@@ -57,6 +57,9 @@ enum MapSource {
     },
 }
 
+/// A map A -> B, its seconds when known, and method details (or null).
+type MethodMap = (Vec<usize>, Option<f64>, serde_json::Value);
+
 /// Prepared shapes (eigenbases) reused across pairs, like the peer does.
 struct PipelineCache {
     params: fmaps::MatchParams,
@@ -65,11 +68,12 @@ struct PipelineCache {
 
 impl MapSource {
     fn open(c: &Collection, method: &str, peer_dir: &std::path::Path) -> anyhow::Result<MapSource> {
-        if let Some(refine) = pipeline_method(method)? {
+        if let Some((refine, starts)) = pipeline_method(method)? {
             return Ok(MapSource::Pipeline(Box::new(PipelineCache {
                 params: fmaps::MatchParams {
                     k_process: 200.max(refine.k_needed()),
                     refine,
+                    starts,
                     ..fmaps::MatchParams::default()
                 },
                 shapes: HashMap::new(),
@@ -91,23 +95,25 @@ impl MapSource {
         Ok(MapSource::Published(c.published_maps(method)?))
     }
 
-    /// The map A -> B and the seconds it took to compute (when known).
+    /// The map A -> B, the seconds it took to compute (when known) and, for
+    /// the pipeline, its orientation score and starts (else null).
     fn map(
         &mut self,
         c: &Collection,
         meshes: &HashMap<String, TriMesh>,
         a: &str,
         b: &str,
-    ) -> anyhow::Result<Option<(Vec<usize>, Option<f64>)>> {
+    ) -> anyhow::Result<Option<MethodMap>> {
+        use serde_json::Value::Null;
         match self {
-            MapSource::Published(m) => Ok(m.read(a, b)?.map(|t| (t, None))),
+            MapSource::Published(m) => Ok(m.read(a, b)?.map(|t| (t, None, Null))),
             MapSource::PyFm { dir, seconds } => {
                 let path = dir.join(format!("{a}_{b}.map"));
                 if !path.exists() {
                     return Ok(None);
                 }
                 let t = fmaps::mesh_io::read_map(&path)?;
-                Ok(Some((t, seconds.get(&(a.into(), b.into())).copied())))
+                Ok(Some((t, seconds.get(&(a.into(), b.into())).copied(), Null)))
             }
             MapSource::Pipeline(cache) => {
                 let t = Instant::now();
@@ -124,7 +130,8 @@ impl MapSource {
                     &cache.params,
                 )
                 .with_context(|| format!("{} {a} -> {b}", c.name()))?;
-                Ok(Some((r.t_ab, Some(t.elapsed().as_secs_f64()))))
+                let info = json!({"orientation": r.orientation, "starts": r.starts});
+                Ok(Some((r.t_ab, Some(t.elapsed().as_secs_f64()), info)))
             }
         }
     }
@@ -133,30 +140,47 @@ impl MapSource {
 /// The refinement of an fmaps pipeline method, `None` for other methods:
 /// `fmaps-init` (none), `fmaps-icp` (10 iterations), `fmaps-zoomout`
 /// (50 -> 150 step 5, pyFM's schedule in `pyfm_pipeline.py`) or
-/// `fmaps-zoomout:START:FINAL:STEP`.
-fn pipeline_method(method: &str) -> anyhow::Result<Option<fmaps::pipeline::Refinement>> {
+/// `fmaps-zoomout:START:FINAL:STEP`; any of them with `@K1,K2,..` appended
+/// adds starts at those initial sizes ([`fmaps::MatchParams::starts`]).
+fn pipeline_method(
+    method: &str,
+) -> anyhow::Result<Option<(fmaps::pipeline::Refinement, Vec<usize>)>> {
     use fmaps::pipeline::Refinement;
-    Ok(Some(match method {
-        "fmaps-init" => Refinement::None,
-        "fmaps-icp" => Refinement::Icp(fmaps::refine::Icp::default()),
-        "fmaps-zoomout" => Refinement::zoomout(50, 150, 5),
-        m => match m.strip_prefix("fmaps-zoomout:") {
-            Some(spec) => {
-                let v: Vec<usize> = spec
-                    .split(':')
-                    .map(str::parse)
-                    .collect::<Result<_, _>>()
-                    .with_context(|| {
+    let (method, starts) = match method.split_once('@') {
+        Some((m, list)) if m.starts_with("fmaps-") => {
+            let starts = list
+                .split(',')
+                .map(str::parse)
+                .collect::<Result<Vec<usize>, _>>()
+                .with_context(|| format!("method {m}@{list}: expected @K1,K2,.."))?;
+            (m, starts)
+        }
+        _ => (method, Vec::new()),
+    };
+    Ok(Some((
+        match method {
+            "fmaps-init" => Refinement::None,
+            "fmaps-icp" => Refinement::Icp(fmaps::refine::Icp::default()),
+            "fmaps-zoomout" => Refinement::zoomout(50, 150, 5),
+            m => match m.strip_prefix("fmaps-zoomout:") {
+                Some(spec) => {
+                    let v: Vec<usize> = spec
+                        .split(':')
+                        .map(str::parse)
+                        .collect::<Result<_, _>>()
+                        .with_context(|| {
                         format!("method {m}: expected fmaps-zoomout:START:FINAL:STEP")
                     })?;
-                let [a, b, c] = v[..] else {
-                    bail!("method {m}: expected fmaps-zoomout:START:FINAL:STEP");
-                };
-                Refinement::zoomout(a, b, c)
-            }
-            None => return Ok(None),
+                    let [a, b, c] = v[..] else {
+                        bail!("method {m}: expected fmaps-zoomout:START:FINAL:STEP");
+                    };
+                    Refinement::zoomout(a, b, c)
+                }
+                None => return Ok(None),
+            },
         },
-    }))
+        starts,
+    )))
 }
 
 /// Per-pair seconds of one pyFM stage's map, counted like ours: loading,
@@ -251,7 +275,7 @@ pub fn eval(args: &Args) -> anyhow::Result<()> {
                         meshes.insert(s.clone(), c.read_mesh(s)?);
                     }
                 }
-                let Some((t_ab, secs)) = pool.install(|| maps.map(&c, &meshes, a, b))? else {
+                let Some((t_ab, secs, info)) = pool.install(|| maps.map(&c, &meshes, a, b))? else {
                     missing += 1;
                     continue;
                 };
@@ -279,6 +303,7 @@ pub fn eval(args: &Args) -> anyhow::Result<()> {
                 per_pair.push(json!({
                     "source": a, "target": b, "mean_error": r.mean_error, "sym_mean_error": r.sym_mean_error,
                     "auc": r.auc, "coverage": r.coverage, "seconds": r.seconds, "map_seconds": secs,
+                    "pipeline": info,
                 }));
             }
             bar.finish_and_clear();

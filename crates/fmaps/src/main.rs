@@ -171,6 +171,10 @@ struct MatchArgs {
     /// Convert maps with the adjoint of C (initial map and refinement).
     #[arg(long)]
     adjoint: bool,
+    /// Multi-start: also run from initial maps of these sizes (e.g.
+    /// `20,30`) and keep the final map whose orientation is best preserved.
+    #[arg(long, value_delimiter = ',', value_name = "K1,K2,..")]
+    starts: Vec<usize>,
     /// Write C_BA (k x k, functions on B to functions on A) as text.
     #[arg(long)]
     save_fmap: Option<PathBuf>,
@@ -831,6 +835,7 @@ fn match_cmd(args: &MatchArgs) -> Result<(), Failure> {
         params.landmarks = read_landmarks(p)?;
     }
     params.adjoint = args.adjoint;
+    params.starts = args.starts.clone();
     params.refine = refinement(args)?;
     params.k_process = params.k_process.max(params.refine.k_needed());
     let pool = rayon::ThreadPoolBuilder::new()
@@ -873,6 +878,8 @@ fn match_cmd(args: &MatchArgs) -> Result<(), Failure> {
                 "final_k": r.c_ba.ncols(),
                 "changed_per_iteration": rep.iterations.iter().map(|i| i.changed).collect::<Vec<_>>(),
             })),
+            "orientation": r.orientation,
+            "starts": r.starts,
             "changed_by_refinement": r.t_ab.iter().zip(&r.t_ab_init).filter(|(x, y)| x != y).count(),
             "energy": r.energy,
             "energy_terms": {"descr": r.energy_terms[0], "lap": r.energy_terms[1],
@@ -924,6 +931,21 @@ fn match_cmd(args: &MatchArgs) -> Result<(), Failure> {
             o,
             "refinement: {rep}; {changed} of {} vertices moved",
             r.t_ab.len()
+        );
+    }
+    outln!(
+        o,
+        "orientation score of the map: {:.3} (1: preserved, -1: mirrored)",
+        r.orientation
+    );
+    for s in &r.starts {
+        outln!(
+            o,
+            "  start k = {:<4} orientation {:.3} ({:.2} s){}",
+            s.k,
+            s.orientation,
+            s.seconds,
+            if s.chosen { "  <- kept" } else { "" }
         );
     }
     match &args.out {

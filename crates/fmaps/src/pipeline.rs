@@ -170,6 +170,16 @@ pub struct MatchParams {
     /// ([`fmaps_solve::compress_descriptors`]); the energy is unchanged to
     /// rounding. On by default.
     pub compress: bool,
+    /// Multi-start: further sizes of the initial map. The pipeline is run
+    /// once per size (`k` and each of these; a ZoomOut starts from the
+    /// smaller of the size and its `k_start`), and the final map whose
+    /// [orientation score](refine::orientation_score) is best (highest;
+    /// lowest with `orient_reversing`) is kept. Small initial maps have
+    /// fewer degrees of freedom for swapping symmetric parts (a left and a
+    /// right limb) and large ones resolve more detail; the orientation of
+    /// the refined map tells which start converged to the right branch,
+    /// without any ground truth. Empty: a single start at `k`.
+    pub starts: Vec<usize>,
 }
 
 impl Default for MatchParams {
@@ -192,6 +202,7 @@ impl Default for MatchParams {
             spectrum: SpectrumParams::default(),
             compress: true,
             refine: Refinement::None,
+            starts: Vec::new(),
         }
     }
 }
@@ -209,6 +220,12 @@ impl MatchParams {
             return bad(format!(
                 "k_descr = {} must be in 2..=k_process ({})",
                 self.k_descr, self.k_process
+            ));
+        }
+        if let Some(&s) = self.starts.iter().find(|&&s| s == 0 || s > self.k_process) {
+            return bad(format!(
+                "the start size {s} must be in 1..=k_process ({})",
+                self.k_process
             ));
         }
         if self.n_descr == 0 || self.subsample == 0 {
@@ -298,6 +315,12 @@ pub struct MatchResult {
     pub t_ab_init: Vec<usize>,
     /// The refinement report, when one ran.
     pub refine: Option<RefineReport>,
+    /// [`refine::orientation_score`] of `t_ab` (near 1: orientation
+    /// preserved, near −1: mirrored, near 0: noise or swapped parts).
+    pub orientation: f64,
+    /// Every start of a multi-start run ([`MatchParams::starts`]); empty
+    /// for a single start.
+    pub starts: Vec<Start>,
     /// Structural measures of the initial `C_BA`.
     pub metrics: solve::FmapMetrics,
     /// Energy terms at the solution, unweighted `[descr, lap, dcomm, orient]`.
@@ -306,6 +329,19 @@ pub struct MatchResult {
     pub energy: f64,
     /// Timings.
     pub times: MatchTimes,
+}
+
+/// One start of a multi-start run.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+pub struct Start {
+    /// Size of the initial map.
+    pub k: usize,
+    /// Orientation score of its final map.
+    pub orientation: f64,
+    /// Its map was kept.
+    pub chosen: bool,
+    /// Seconds for this start (descriptors to refined map).
+    pub seconds: f64,
 }
 
 /// Runs the whole pipeline from source `a` to target `b`.
@@ -393,6 +429,9 @@ pub fn match_prepared(
     params: &MatchParams,
 ) -> Result<MatchResult, MatchError> {
     params.check()?;
+    if !params.starts.is_empty() {
+        return multi_start(a, b, params);
+    }
     let k = params.k;
     for (shape, s) in [("source", a), ("target", b)] {
         if s.basis.k() < params.k_process.max(k) {
@@ -470,6 +509,8 @@ pub fn match_prepared(
         t_ab,
         c_ba,
         refine: None,
+        orientation: 0.0,
+        starts: Vec::new(),
         metrics,
         energy_terms,
         energy: energy_value,
@@ -494,6 +535,74 @@ pub fn match_prepared(
             refine_result(&mut out, a, b, &zo)?;
         }
     }
+    out.orientation = orientation_of(&out.t_ab, a, b)?;
+    Ok(out)
+}
+
+fn orientation_of(t_ab: &[usize], a: &PreparedShape, b: &PreparedShape) -> Result<f64, MatchError> {
+    Ok(refine::orientation_score(
+        t_ab,
+        &a.vertices,
+        &a.faces,
+        &b.vertices,
+        &b.faces,
+    )?)
+}
+
+/// [`MatchParams::starts`]: one run per initial size, keep the best
+/// oriented final map.
+fn multi_start(
+    a: &PreparedShape,
+    b: &PreparedShape,
+    params: &MatchParams,
+) -> Result<MatchResult, MatchError> {
+    let mut sizes = vec![params.k];
+    for &s in &params.starts {
+        if !sizes.contains(&s) {
+            sizes.push(s);
+        }
+    }
+    let sign = if params.orient_reversing { -1.0 } else { 1.0 };
+    let mut best: Option<(usize, MatchResult)> = None;
+    let mut starts = Vec::with_capacity(sizes.len());
+    let mut times = MatchTimes::default();
+    for k in sizes {
+        let mut p = MatchParams {
+            k,
+            starts: Vec::new(),
+            ..params.clone()
+        };
+        if let Refinement::ZoomOut { zoomout, .. } = &mut p.refine {
+            zoomout.k_start = zoomout.k_start.min(k);
+        }
+        let r = match_prepared(a, b, &p)?;
+        for (acc, x) in [
+            (&mut times.descriptors, r.times.descriptors),
+            (&mut times.operators, r.times.operators),
+            (&mut times.solve, r.times.solve),
+            (&mut times.point_map, r.times.point_map),
+            (&mut times.refine, r.times.refine),
+            (&mut times.total, r.times.total),
+        ] {
+            *acc += x;
+        }
+        starts.push(Start {
+            k,
+            orientation: r.orientation,
+            chosen: false,
+            seconds: r.times.total,
+        });
+        if best
+            .as_ref()
+            .is_none_or(|(_, b)| sign * r.orientation > sign * b.orientation)
+        {
+            best = Some((starts.len() - 1, r));
+        }
+    }
+    let (chosen, mut out) = best.expect("at least one start");
+    starts[chosen].chosen = true;
+    out.starts = starts;
+    out.times = times;
     Ok(out)
 }
 

@@ -320,6 +320,23 @@ fn match_writes_a_one_based_map_and_reports_stages() {
     assert_eq!(v["refine"]["method"], "zoomout 8:20:4");
     assert_eq!(v["refine"]["iterations"], 3);
     assert_eq!(v["refine"]["final_k"], 20);
+    // The map of a shape to itself keeps its orientation.
+    assert!(v["orientation"].as_f64().unwrap() > 0.9, "{v}");
+    assert_eq!(v["starts"].as_array().unwrap().len(), 0);
+    // Multi-start: one entry per distinct size, exactly one kept.
+    let out = fmaps()
+        .args(["match", &s(&mesh), &s(&mesh), "--json"])
+        .args(["--k", "12", "--k-process", "20", "--n-descr", "30"])
+        .args(["--zoomout", "8:20:4", "--starts", "6,10"])
+        .output()
+        .unwrap();
+    assert!(out.status.success());
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let starts = v["starts"].as_array().unwrap();
+    let ks: Vec<u64> = starts.iter().map(|s| s["k"].as_u64().unwrap()).collect();
+    assert_eq!(ks, [12, 6, 10]);
+    let kept = starts.iter().filter(|s| s["chosen"] == true).count();
+    assert_eq!(kept, 1, "{v}");
     for bad in ["8:20", "0:20:1", "30:20:1", "8:20:x", "20:40:5"] {
         let out = fmaps()
             .args(["match", &s(&mesh), &s(&mesh), "--k", "12", "--zoomout", bad])

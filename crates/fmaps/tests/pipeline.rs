@@ -55,6 +55,9 @@ fn a_permuted_copy_is_matched_to_the_true_vertices() {
     assert!(r.metrics.laplacian_commutativity < 0.05, "{:?}", r.metrics);
     assert_eq!(r.c_ba.shape(), (20, 20));
     assert_eq!(r.t_ab_init, r.t_ab);
+    // A near-exact map preserves orientation.
+    assert!(r.orientation > 0.9, "orientation {}", r.orientation);
+    assert!(r.starts.is_empty());
 
     // ZoomOut 10 -> 40 (from the 10 x 10 block) and ICP keep or improve it,
     // and the refined ZoomOut map is exact on this isometry.
@@ -98,6 +101,9 @@ fn orientation_term_is_what_tells_a_shape_from_its_mirror_image() {
             ..small_params()
         };
         let r = match_shapes(&a, &b, &p).unwrap();
+        if reversing {
+            assert!(r.orientation < -0.9, "orientation {}", r.orientation);
+        }
         (0..n).filter(|&x| r.t_ab[x] == x).count()
     };
     let (rev, pres) = (exact(true), exact(false));
@@ -122,6 +128,83 @@ fn bad_parameters_are_errors() {
     };
     assert!(matches!(
         match_shapes(&a, &a, &p),
+        Err(MatchError::InvalidParameter(_))
+    ));
+}
+
+#[test]
+fn multi_start_keeps_the_best_oriented_start_and_equals_that_single_run() {
+    // A against a bent copy of itself (the truth is the identity).
+    let a = blob();
+    let n = a.n_vertices();
+    let (v, f) = a.clone().into_parts();
+    let vb: Vec<[f64; 3]> = v
+        .iter()
+        .map(|p| {
+            let t = 0.1 * p[0];
+            [
+                p[0] * t.cos() - p[1] * t.sin(),
+                p[0] * t.sin() + p[1] * t.cos(),
+                p[2],
+            ]
+        })
+        .collect();
+    let b = TriMesh::new(vb, f).unwrap();
+    for (reversing, sign) in [(false, 1.0), (true, -1.0)] {
+        let base = MatchParams {
+            refine: Refinement::zoomout(20, 30, 5),
+            orient_reversing: reversing,
+            ..small_params()
+        };
+        let multi = MatchParams {
+            starts: vec![4, 8, 4],
+            ..base.clone()
+        };
+        let r = match_shapes(&a, &b, &multi).unwrap();
+        // Duplicates dropped, k first.
+        let ks: Vec<usize> = r.starts.iter().map(|s| s.k).collect();
+        assert_eq!(ks, [20, 4, 8]);
+        let chosen: Vec<_> = r.starts.iter().filter(|s| s.chosen).collect();
+        assert_eq!(chosen.len(), 1);
+        let best = chosen[0];
+        for s in &r.starts {
+            assert!(
+                sign * s.orientation <= sign * best.orientation,
+                "{:?}",
+                r.starts
+            );
+        }
+        assert_eq!(r.orientation, best.orientation);
+        // The same as a single run from the chosen size.
+        let mut single = MatchParams {
+            k: best.k,
+            ..base.clone()
+        };
+        if let Refinement::ZoomOut { zoomout, .. } = &mut single.refine {
+            zoomout.k_start = zoomout.k_start.min(best.k);
+        }
+        let s = match_shapes(&a, &b, &single).unwrap();
+        assert_eq!(s.t_ab, r.t_ab);
+        assert_eq!(s.orientation, r.orientation);
+        if !reversing {
+            // Mean distance (on A) between the image and the truth, for a
+            // shape about 2.6 across.
+            let err = (0..n)
+                .map(|x| {
+                    let (p, q) = (v[r.t_ab[x]], v[x]);
+                    (0..3).map(|i| (p[i] - q[i]).powi(2)).sum::<f64>().sqrt()
+                })
+                .sum::<f64>()
+                / n as f64;
+            assert!(err < 0.05, "mean error {err}");
+        }
+    }
+    let bad = MatchParams {
+        starts: vec![0],
+        ..small_params()
+    };
+    assert!(matches!(
+        match_shapes(&a, &a, &bad),
         Err(MatchError::InvalidParameter(_))
     ));
 }

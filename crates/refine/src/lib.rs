@@ -41,6 +41,7 @@
 
 mod icp;
 mod linalg;
+mod orientation;
 mod sampling;
 mod zoomout;
 
@@ -50,6 +51,7 @@ use fmaps_eigensolve::SpectralBasis;
 use nalgebra::DMatrix;
 
 pub use icp::Icp;
+pub use orientation::orientation_score;
 pub use sampling::farthest_point_sampling;
 pub use zoomout::{Subsample, ZoomOut};
 
