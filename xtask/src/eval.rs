@@ -387,10 +387,10 @@ pub fn eval(args: &Args) -> anyhow::Result<()> {
         }
     }
     for cname in &collections {
-        let series: Vec<crate::plot::Series> = rows
+        let series: Vec<fmaps_viz::plot::Series> = rows
             .iter()
             .filter(|r| r["collection"] == cname.as_str())
-            .map(|r| crate::plot::Series {
+            .map(|r| fmaps_viz::plot::Series {
                 label: format!(
                     "{} (mean {:.2}, AUC {:.3})",
                     r["method"].as_str().unwrap_or(""),
@@ -403,9 +403,8 @@ pub fn eval(args: &Args) -> anyhow::Result<()> {
             .collect();
         let png = out_dir.join(format!("{cname}-curves.png"));
         let title = format!("{cname}: cumulative geodesic error");
-        crate::plot::line_plot_png(
-            &png,
-            &crate::plot::Plot {
+        fmaps_viz::plot::line_plot(
+            &fmaps_viz::plot::Plot {
                 title: &title,
                 x_label: "geodesic error / sqrt(area)",
                 y_label: "fraction of points",
@@ -415,7 +414,8 @@ pub fn eval(args: &Args) -> anyhow::Result<()> {
                 y_ticks: vec![0.0, 0.2, 0.4, 0.6, 0.8, 1.0],
             },
             &series,
-        )?;
+        )
+        .save_png(&png)?;
         println!("curves: {}", png.display());
     }
     println!("per-pair results: {}", out_dir.display());

@@ -115,7 +115,7 @@ pub fn figures(args: &Args) -> anyhow::Result<()> {
             cname.into(),
             json!({"pairs": pairs, "k": KS, "mean_error_x100": means}),
         );
-        series.push(crate::plot::Series {
+        series.push(fmaps_viz::plot::Series {
             label: format!("{cname} (first {} test pairs)", pairs.len()),
             x: KS.iter().map(|&k| k as f64).collect(),
             y: means,
@@ -127,9 +127,8 @@ pub fn figures(args: &Args) -> anyhow::Result<()> {
         .fold(0.0f64, f64::max);
     let ytop = (ymax / 5.0).ceil() * 5.0;
     let fig8 = out.join("fig8-representation.png");
-    crate::plot::line_plot_png(
-        &fig8,
-        &crate::plot::Plot {
+    fmaps_viz::plot::line_plot(
+        &fmaps_viz::plot::Plot {
             title: "Seed Fig. 8: true map as k x k C",
             x_label: "basis size k",
             y_label: "mean geodesic error x100",
@@ -139,7 +138,8 @@ pub fn figures(args: &Args) -> anyhow::Result<()> {
             y_ticks: (0..=5).map(|i| ytop * f64::from(i) / 5.0).collect(),
         },
         &series,
-    )?;
+    )
+    .save_png(&fig8)?;
     println!("{}", fig8.display());
 
     // Figure 1: C of the first FAUST pair.
@@ -171,22 +171,22 @@ pub fn figures(args: &Args) -> anyhow::Result<()> {
         by_k.push(json!({"k": kk, "sparsity": mm.sparsity, "orthonormality": mm.orthonormality}));
     }
     let gt_png = out.join("fmap-ground-truth.png");
-    crate::plot::heatmap_png(
-        &gt_png,
+    fmaps_viz::plot::heatmap(
         &format!("true map, k={k}: {:.1}% < 0.1", 100.0 * m_gt.sparsity),
         &c_gt,
         1.0,
-    )?;
+    )
+    .save_png(&gt_png)?;
     let init_png = out.join("fmap-fmaps-init.png");
-    crate::plot::heatmap_png(
-        &init_png,
+    fmaps_viz::plot::heatmap(
         &format!(
             "fmaps-init, k=50: {:.1}% < 0.1",
             100.0 * init.metrics.sparsity
         ),
         &init.c_ba,
         1.0,
-    )?;
+    )
+    .save_png(&init_png)?;
     println!(
         "C of the true map (k = {k}): {:.1}% of entries below 0.1, ||CtC - I|| = {:.3}\n\
          C of fmaps-init (k = 50): {:.1}% below 0.1, ||CtC - I|| = {:.3}\n{}\n{}",

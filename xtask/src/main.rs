@@ -17,7 +17,6 @@ mod eval;
 mod figures;
 mod fit_check;
 mod geodesic_check;
-mod plot;
 mod util;
 
 use clap::{Parser, Subcommand};

@@ -11,10 +11,12 @@
 //! | [`eval`] | `fmaps-eval` | benchmark protocol: geodesic errors, curves, dataset loader |
 //! | [`descriptors`] | `fmaps-descriptors` | HKS, WKS, landmark descriptors |
 //! | [`solve`] | `fmaps-solve` | functional-map energy and exact solve, map conversions |
+//! | [`refine`] | `fmaps-refine` | ICP, ZoomOut, orientation score |
+//! | [`viz`] | `fmaps-viz` | software rendering to PNG, colour maps, plots, coloured PLY |
 //!
 //! and provides [`spectrum`], the mesh-to-eigenbasis stage with per-stage
 //! timings, [`pipeline`] ([`match_shapes`]: two meshes to a point map), plus
-//! [`npy`] for handing results to Python.
+//! [`npy`] for handing results to Python and [`pictures`] of a map.
 //!
 //! ```
 //! use fmaps::{spectrum, SpectrumParams};
@@ -31,6 +33,7 @@
 #![deny(missing_docs)]
 
 pub mod npy;
+pub mod pictures;
 pub mod pipeline;
 
 use std::time::Instant;
@@ -43,6 +46,7 @@ pub use fmaps_laplacian as laplacian;
 pub use fmaps_mesh_io as mesh_io;
 pub use fmaps_refine as refine;
 pub use fmaps_solve as solve;
+pub use fmaps_viz as viz;
 pub use pipeline::{MatchParams, MatchResult, match_shapes};
 
 use eigensolve::{EigenProblem, EigenSolver, NativeParams, NativeSolver, SpectralBasis};

@@ -11,6 +11,8 @@ use fmaps::mesh_io::{self, TriMesh};
 use fmaps::{Backend, SpectrumParams};
 use serde_json::json;
 
+mod demo;
+
 #[derive(Parser)]
 #[command(
     name = "fmaps",
@@ -24,6 +26,29 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
+    /// The whole method on a built-in pair with known correspondence (an
+    /// asymmetric creature and a bent, renumbered copy): eigenbases, WKS,
+    /// functional map, ZoomOut, exact-geodesic errors, and pictures.
+    #[command(
+        after_help = "Examples:\n  fmaps demo\n  fmaps demo --out pictures --subdivisions 5 --json\n\n\
+Writes color-transfer.png (and -init), texture-transfer.png, error-zoomout.png / error-init.png,\n\
+fmap.png, spectral-embedding.png, curves.png and source.ply / target.ply (coloured, for MeshLab)."
+    )]
+    Demo {
+        /// Folder for the pictures (created).
+        #[arg(long, default_value = "fmaps-demo")]
+        out: PathBuf,
+        /// Mesh resolution: the icosphere's subdivisions (4 = 2,562
+        /// vertices, 5 = 10,242).
+        #[arg(long, default_value_t = 4)]
+        subdivisions: u32,
+        /// Threads (0 = all cores).
+        #[arg(long, default_value_t = 0)]
+        threads: usize,
+        /// Print one JSON object.
+        #[arg(long)]
+        json: bool,
+    },
     /// Match two shapes: eigenbases, WKS descriptors, the functional map
     /// (exact solve with the orientation term), point map A -> B.
     #[command(
@@ -220,15 +245,17 @@ enum Mass {
 
 /// Appends a line to an output buffer (printed at once by [`emit`], so a
 /// closed pipe never interrupts a half-written report).
-macro_rules! outln {
+macro_rules! outln_impl {
     ($o:expr, $($t:tt)*) => {{
         use std::fmt::Write as _;
         let _ = writeln!($o, $($t)*);
     }};
 }
 
+pub(crate) use outln_impl as outln;
+
 /// Prints a buffer; a closed pipe (`fmaps ... | head`) is not an error.
-fn emit(text: &str) -> Result<(), Failure> {
+pub(crate) fn emit(text: &str) -> Result<(), Failure> {
     use std::io::Write as _;
     let mut out = std::io::stdout().lock();
     match out.write_all(text.as_bytes()).and_then(|()| out.flush()) {
@@ -251,6 +278,12 @@ fn runtime<E: Into<anyhow::Error>>(e: E) -> Failure {
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
+        Command::Demo {
+            out,
+            subdivisions,
+            threads,
+            json,
+        } => demo::run(&out, subdivisions, threads, json),
         Command::Info { mesh, json } => info(&mesh, json),
         Command::Match(args) => match_cmd(&args),
         Command::Geodesic {

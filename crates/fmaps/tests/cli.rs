@@ -353,3 +353,48 @@ fn match_writes_a_one_based_map_and_reports_stages() {
         .unwrap();
     assert_eq!(out.status.code(), Some(2));
 }
+
+#[test]
+fn demo_matches_the_builtin_pair_and_writes_pictures() {
+    let dir = tmpdir("demo");
+    let out = fmaps()
+        .args(["demo", "--subdivisions", "3", "--json", "--out"])
+        .arg(&dir)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(v["n_vertices"], 642);
+    assert_eq!(v["geodesic"], "exact");
+    // ZoomOut improves the initial map of this near-isometric pair, and
+    // the result is accurate (errors are fractions of sqrt(area)).
+    let (init, fin) = (
+        v["mean_error_init"].as_f64().unwrap(),
+        v["mean_error"].as_f64().unwrap(),
+    );
+    assert!(fin < init && fin < 0.02, "{init} -> {fin}");
+    assert!(v["orientation"].as_f64().unwrap() > 0.8);
+    for name in [
+        "color-transfer.png",
+        "error-zoomout.png",
+        "fmap.png",
+        "curves.png",
+    ] {
+        let bytes = std::fs::read(dir.join(name)).unwrap();
+        assert_eq!(&bytes[1..4], b"PNG", "{name}");
+    }
+    let ply = std::fs::read_to_string(dir.join("target.ply")).unwrap();
+    assert!(ply.starts_with("ply\nformat ascii 1.0"));
+    assert!(ply.contains("element vertex 642"));
+    // Out-of-range resolution: bad usage.
+    let out = fmaps()
+        .args(["demo", "--subdivisions", "9", "--out"])
+        .arg(&dir)
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+}

@@ -5,6 +5,8 @@ use std::collections::HashMap;
 
 use crate::TriMesh;
 
+pub use crate::creature::{MeshPair, Pose, creature, creature_pair};
+
 /// An icosphere of the given radius: the icosahedron subdivided 1-to-4
 /// `subdivisions` times with new vertices projected onto the sphere.
 /// `10 * 4^s + 2` vertices, `20 * 4^s` faces, outward-oriented, genus 0.

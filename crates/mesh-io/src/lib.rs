@@ -45,6 +45,7 @@
 #![deny(missing_docs)]
 
 mod corres;
+mod creature;
 mod error;
 pub mod generate;
 mod obj;

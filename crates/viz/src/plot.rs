@@ -1,24 +1,36 @@
-//! A small line-plot renderer to PNG: axes, grid, labelled ticks, one
-//! polyline per series and a legend. Text uses the 8x8 bitmap glyphs of
-//! `font8x8` (font data compiled in), so no system font library is needed.
+//! Line plots (axes, grid, labelled ticks, one polyline per series, a
+//! legend) and matrix heat maps. Text uses the 8x8 bitmap glyphs of
+//! `font8x8` (compiled in), so no system font library is needed.
 
-use std::path::Path;
+use crate::image::{BLACK, Image, WHITE};
 
 /// One curve.
+#[derive(Debug, Clone)]
 pub struct Series {
+    /// Legend text.
     pub label: String,
+    /// Abscissae.
     pub x: Vec<f64>,
+    /// Ordinates.
     pub y: Vec<f64>,
 }
 
 /// What to draw.
+#[derive(Debug, Clone)]
 pub struct Plot<'a> {
+    /// Title above the axes.
     pub title: &'a str,
+    /// Label of the horizontal axis.
     pub x_label: &'a str,
+    /// Label of the vertical axis.
     pub y_label: &'a str,
+    /// Horizontal range.
     pub x_range: (f64, f64),
+    /// Vertical range.
     pub y_range: (f64, f64),
+    /// Horizontal ticks (labelled).
     pub x_ticks: Vec<f64>,
+    /// Vertical ticks (labelled).
     pub y_ticks: Vec<f64>,
 }
 
@@ -39,73 +51,9 @@ const PALETTE: [[u8; 3]; 8] = [
     [23, 190, 207],
 ];
 
-struct Canvas {
-    px: Vec<u8>,
-}
-
-impl Canvas {
-    fn write_png(&self, path: &Path) -> anyhow::Result<()> {
-        let file = std::io::BufWriter::new(std::fs::File::create(path)?);
-        let mut enc = png::Encoder::new(file, W as u32, H as u32);
-        enc.set_color(png::ColorType::Rgb);
-        enc.set_depth(png::BitDepth::Eight);
-        enc.write_header()?.write_image_data(&self.px)?;
-        Ok(())
-    }
-
-    fn set(&mut self, x: i64, y: i64, c: [u8; 3]) {
-        if x >= 0 && y >= 0 && (x as usize) < W && (y as usize) < H {
-            let i = 3 * (y as usize * W + x as usize);
-            self.px[i..i + 3].copy_from_slice(&c);
-        }
-    }
-
-    fn line(&mut self, (x0, y0): (f64, f64), (x1, y1): (f64, f64), c: [u8; 3], width: i64) {
-        let steps = ((x1 - x0).abs().max((y1 - y0).abs()).ceil() as usize).max(1);
-        for s in 0..=steps {
-            let t = s as f64 / steps as f64;
-            let (x, y) = (
-                (x0 + t * (x1 - x0)).round() as i64,
-                (y0 + t * (y1 - y0)).round() as i64,
-            );
-            for dx in 0..width {
-                for dy in 0..width {
-                    self.set(x + dx - width / 2, y + dy - width / 2, c);
-                }
-            }
-        }
-    }
-
-    fn text(&mut self, x: i64, y: i64, s: &str, scale: i64, c: [u8; 3]) {
-        for (k, ch) in s.chars().enumerate() {
-            let glyph = font8x8::legacy::BASIC_LEGACY
-                .get(ch as usize)
-                .copied()
-                .unwrap_or([0; 8]);
-            for (row, bits) in glyph.iter().enumerate() {
-                for col in 0..8 {
-                    if bits >> col & 1 == 1 {
-                        for sx in 0..scale {
-                            for sy in 0..scale {
-                                self.set(
-                                    x + (k as i64 * 8 + col) * scale + sx,
-                                    y + row as i64 * scale + sy,
-                                    c,
-                                );
-                            }
-                        }
-                    }
-                }
-            }
-        }
-    }
-}
-
-/// Renders the series to a PNG file.
-pub fn line_plot_png(path: &Path, plot: &Plot<'_>, series: &[Series]) -> anyhow::Result<()> {
-    let mut cv = Canvas {
-        px: vec![255; W * H * 3],
-    };
+/// Renders the series (900 x 600 pixels).
+pub fn line_plot(plot: &Plot<'_>, series: &[Series]) -> Image {
+    let mut cv = Image::new(W, H, WHITE);
     let (x0, x1) = plot.x_range;
     let (y0, y1) = plot.y_range;
     let px = |x: f64| LEFT as f64 + (x - x0) / (x1 - x0) * (W - LEFT - RIGHT) as f64;
@@ -172,25 +120,18 @@ pub fn line_plot_png(path: &Path, plot: &Plot<'_>, series: &[Series]) -> anyhow:
         );
         cv.text(lx + 40, ly, &s.label, 1, black);
     }
-    cv.write_png(path)
+    cv
 }
 
 /// A matrix as a heat map (seed paper, Figure 1): |value| from white (0) to
 /// dark (>= `vmax`), positive in red and negative in blue, with a title
 /// and the matrix size. One square cell per entry, scaled to ~560 px.
-pub fn heatmap_png(
-    path: &Path,
-    title: &str,
-    m: &nalgebra::DMatrix<f64>,
-    vmax: f64,
-) -> anyhow::Result<()> {
+pub fn heatmap(title: &str, m: &nalgebra::DMatrix<f64>, vmax: f64) -> Image {
     let (rows, cols) = m.shape();
     let cell = (540 / rows.max(cols).max(1)).max(1);
     let (x0, y0) = ((W - cell * cols) / 2, TOP + 10);
-    let mut cv = Canvas {
-        px: vec![255; W * H * 3],
-    };
-    let black = [0, 0, 0];
+    let mut cv = Image::new(W, H, WHITE);
+    let black = BLACK;
     cv.text(x0 as i64, 20, title, 2, black);
     for i in 0..rows {
         for j in 0..cols {
@@ -217,5 +158,5 @@ pub fn heatmap_png(
         1,
         black,
     );
-    cv.write_png(path)
+    cv
 }

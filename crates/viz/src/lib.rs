@@ -1,0 +1,78 @@
+//! Pictures of shape correspondences, part of fmaps, with no GPU and no
+//! system libraries: a software rasteriser for triangle meshes
+//! ([`render`]), colours that show a map ([`position_colors`] carried by
+//! [`push_colors`], [`checkerboard`] textures, error heat maps through
+//! [`colormap`] with a [`colorbar`]), matrix heat maps and line plots
+//! ([`plot`]), PNG output ([`Image::save_png`]) and coloured PLY for
+//! MeshLab users ([`write_colored_ply`]).
+//!
+//! ```
+//! use fmaps_viz::{Image, View, position_colors, push_colors, render};
+//! let mesh = fmaps_mesh_io::generate::icosphere(1.0, 2);
+//! let (v, f) = (mesh.vertices(), mesh.faces());
+//! // Colour transfer through the identity map: both sides look the same.
+//! let source = position_colors(v);
+//! let target = push_colors(&(0..v.len()).collect::<Vec<_>>(), &source, v.len(), f);
+//! assert_eq!(source, target);
+//! let view = View { width: 200, height: 200, ..View::default() };
+//! let picture = Image::hstack(
+//!     &[render(v, f, &source, &view)?, render(v, f, &target, &view)?],
+//!     [255, 255, 255],
+//! );
+//! assert_eq!((picture.width(), picture.height()), (400, 200));
+//! let png = picture.to_png()?;
+//! assert_eq!(&png[1..4], b"PNG");
+//! # Ok::<(), fmaps_viz::Error>(())
+//! ```
+#![deny(missing_docs)]
+
+mod color;
+mod image;
+pub mod plot;
+mod ply;
+mod render;
+
+pub use color::{checkerboard, colorbar, colormap, position_colors, push_colors, scalar_colors};
+pub use image::{BLACK, Image, WHITE};
+pub use ply::{colored_ply, write_colored_ply};
+pub use render::{View, render};
+
+/// Errors of this crate.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[non_exhaustive]
+pub enum Error {
+    /// An input has the wrong length.
+    #[error("{what}: got {found}, expected {expected}")]
+    Size {
+        /// What was measured.
+        what: &'static str,
+        /// Its size.
+        found: usize,
+        /// The size needed.
+        expected: usize,
+    },
+    /// A face refers to a vertex that does not exist.
+    #[error("face {at} {face:?} refers to a vertex beyond the {n} vertices")]
+    Face {
+        /// Face index.
+        at: usize,
+        /// Its vertices.
+        face: [usize; 3],
+        /// Number of vertices.
+        n: usize,
+    },
+    /// PNG encoding failed.
+    #[error("PNG encoding: {0}")]
+    Png(String),
+    /// A file could not be written.
+    #[error("{path}: {message}")]
+    Io {
+        /// The file.
+        path: String,
+        /// The cause.
+        message: String,
+    },
+}
+
+/// Result alias of this crate.
+pub type Result<T, E = Error> = std::result::Result<T, E>;
