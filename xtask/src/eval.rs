@@ -403,19 +403,7 @@ pub fn eval(args: &Args) -> anyhow::Result<()> {
             .collect();
         let png = out_dir.join(format!("{cname}-curves.png"));
         let title = format!("{cname}: cumulative geodesic error");
-        fmaps_viz::plot::line_plot(
-            &fmaps_viz::plot::Plot {
-                title: &title,
-                x_label: "geodesic error / sqrt(area)",
-                y_label: "fraction of points",
-                x_range: (0.0, params.max_threshold),
-                y_range: (0.0, 1.0),
-                x_ticks: vec![0.0, 0.05, 0.1, 0.15, 0.2, 0.25],
-                y_ticks: vec![0.0, 0.2, 0.4, 0.6, 0.8, 1.0],
-            },
-            &series,
-        )
-        .save_png(&png)?;
+        fmaps_viz::plot::cumulative_curves(&title, params.max_threshold, &series).save_png(&png)?;
         println!("curves: {}", png.display());
     }
     println!("per-pair results: {}", out_dir.display());

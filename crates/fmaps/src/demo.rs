@@ -110,16 +110,9 @@ fn run_inner(out_dir: &Path, subdivisions: u32, as_json: bool) -> Result<(), Fai
         },
     ];
     save(
-        plot::line_plot(
-            &plot::Plot {
-                title: "built-in creature pair: cumulative geodesic error",
-                x_label: "geodesic error / sqrt(area)",
-                y_label: "fraction of points",
-                x_range: (0.0, ep.max_threshold),
-                y_range: (0.0, 1.0),
-                x_ticks: vec![0.0, 0.05, 0.1, 0.15, 0.2, 0.25],
-                y_ticks: vec![0.0, 0.2, 0.4, 0.6, 0.8, 1.0],
-            },
+        plot::cumulative_curves(
+            "built-in creature pair: cumulative geodesic error",
+            ep.max_threshold,
             &series,
         ),
         "curves.png",

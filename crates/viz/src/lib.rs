@@ -74,5 +74,32 @@ pub enum Error {
     },
 }
 
+/// Checks one colour per vertex and faces within the vertices.
+fn check_colored_mesh(
+    vertices: &[[f64; 3]],
+    faces: &[[usize; 3]],
+    colors: &[[u8; 3]],
+) -> Result<()> {
+    if colors.len() != vertices.len() {
+        return Err(Error::Size {
+            what: "vertex colours",
+            found: colors.len(),
+            expected: vertices.len(),
+        });
+    }
+    if let Some((at, f)) = faces
+        .iter()
+        .enumerate()
+        .find(|(_, f)| f.iter().any(|&v| v >= vertices.len()))
+    {
+        return Err(Error::Face {
+            at,
+            face: *f,
+            n: vertices.len(),
+        });
+    }
+    Ok(())
+}
+
 /// Result alias of this crate.
 pub type Result<T, E = Error> = std::result::Result<T, E>;

@@ -160,3 +160,23 @@ pub fn heatmap(title: &str, m: &nalgebra::DMatrix<f64>, vmax: f64) -> Image {
     );
     cv
 }
+
+/// Cumulative error curves: the fraction of points (0 to 1) under each
+/// normalised geodesic error threshold from 0 to `max_threshold`.
+pub fn cumulative_curves(title: &str, max_threshold: f64, series: &[Series]) -> Image {
+    let ticks = 5;
+    line_plot(
+        &Plot {
+            title,
+            x_label: "geodesic error / sqrt(area)",
+            y_label: "fraction of points",
+            x_range: (0.0, max_threshold),
+            y_range: (0.0, 1.0),
+            x_ticks: (0..=ticks)
+                .map(|i| max_threshold * i as f64 / ticks as f64)
+                .collect(),
+            y_ticks: vec![0.0, 0.2, 0.4, 0.6, 0.8, 1.0],
+        },
+        series,
+    )
+}

@@ -11,24 +11,7 @@ pub fn colored_ply(
     faces: &[[usize; 3]],
     colors: &[[u8; 3]],
 ) -> Result<String> {
-    if colors.len() != vertices.len() {
-        return Err(Error::Size {
-            what: "vertex colours",
-            found: colors.len(),
-            expected: vertices.len(),
-        });
-    }
-    if let Some((at, f)) = faces
-        .iter()
-        .enumerate()
-        .find(|(_, f)| f.iter().any(|&v| v >= vertices.len()))
-    {
-        return Err(Error::Face {
-            at,
-            face: *f,
-            n: vertices.len(),
-        });
-    }
+    crate::check_colored_mesh(vertices, faces, colors)?;
     let mut s = String::with_capacity(40 * (vertices.len() + faces.len()) + 256);
     let _ = write!(
         s,

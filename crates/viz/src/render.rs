@@ -68,24 +68,7 @@ pub fn render(
     colors: &[[u8; 3]],
     view: &View,
 ) -> Result<Image> {
-    if colors.len() != vertices.len() {
-        return Err(Error::Size {
-            what: "vertex colours",
-            found: colors.len(),
-            expected: vertices.len(),
-        });
-    }
-    if let Some((at, f)) = faces
-        .iter()
-        .enumerate()
-        .find(|(_, f)| f.iter().any(|&v| v >= vertices.len()))
-    {
-        return Err(Error::Face {
-            at,
-            face: *f,
-            n: vertices.len(),
-        });
-    }
+    crate::check_colored_mesh(vertices, faces, colors)?;
     if view.width == 0 || view.height == 0 {
         return Err(Error::Size {
             what: "picture size",
