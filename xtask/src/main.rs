@@ -6,6 +6,8 @@
 //! - `cargo xtask eval [--collection C] [--pairs N]`: the benchmark table
 //!   (published maps today), JSON per method in `target/eval/`.
 //! - `cargo xtask descriptor-check`: HKS/WKS against pyFM's.
+//! - `cargo xtask pictures`: pictures of one FAUST and one TOSCA pair in
+//!   `docs/pictures/`.
 //! - `cargo xtask geodesic-check`: exact geodesics against tvb-gdist (largest
 //!   relative difference, time per source).
 
@@ -17,6 +19,7 @@ mod eval;
 mod figures;
 mod fit_check;
 mod geodesic_check;
+mod pictures;
 mod util;
 
 use clap::{Parser, Subcommand};
@@ -46,6 +49,8 @@ enum Command {
     BenchRefine(bench_refine::Args),
     /// The seed paper's Figure 8 curve and Figure 1 heat maps, into docs/.
     Figures(figures::Args),
+    /// Pictures of one test pair per collection (transfer, errors, C, embedding, curves), into docs/pictures/.
+    Pictures(pictures::Args),
 }
 
 fn main() -> anyhow::Result<()> {
@@ -56,6 +61,7 @@ fn main() -> anyhow::Result<()> {
         Command::GeodesicCheck(a) => geodesic_check::geodesic_check(&a),
         Command::FitCheck(a) => fit_check::fit_check(&a),
         Command::Figures(a) => figures::figures(&a),
+        Command::Pictures(a) => pictures::pictures(&a),
         Command::BenchMatch(a) => bench_match::bench_match(&a),
         Command::BenchRefine(a) => bench_refine::bench_refine(&a),
     }

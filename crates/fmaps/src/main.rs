@@ -12,6 +12,7 @@ use fmaps::{Backend, SpectrumParams};
 use serde_json::json;
 
 mod demo;
+mod render_cmd;
 
 #[derive(Parser)]
 #[command(
@@ -59,6 +60,11 @@ Defaults are the literature's automatic pipeline (pyFM's): 200 eigenpairs, 100 W
 a 50 x 50 map, weights descr 0.1, lap 1e-3 (resolvent mask), dcomm 1, orientation 1."
     )]
     Match(MatchArgs),
+    /// Pictures as PNG (and coloured PLY for MeshLab): colour or texture
+    /// transfer through a map, its error heat map, a functional-map
+    /// matrix, a spectral embedding, any per-vertex scalar field.
+    #[command(subcommand)]
+    Render(render_cmd::RenderCommand),
     /// Validate a mesh: counts, defects, components, boundary, genus.
     #[command(after_help = "Example:\n  fmaps info tr_reg_000.off --json")]
     Info {
@@ -115,6 +121,9 @@ auc (area under the cumulative curve on [0, 0.25], normalized), coverage, geodes
     Eval {
         #[command(flatten)]
         files: EvalFiles,
+        /// The reverse map B -> A, for bijectivity.
+        #[arg(long)]
+        reverse_map: Option<PathBuf>,
         /// Geodesic method.
         #[arg(long, value_enum, default_value_t = GeodesicMethod::Exact)]
         geodesic: GeodesicMethod,
@@ -295,9 +304,11 @@ fn main() -> ExitCode {
         } => geodesic(&mesh, &source, method, out.as_deref(), json),
         Command::Eval {
             files,
+            reverse_map,
             geodesic,
             json,
-        } => eval(&files, geodesic, json),
+        } => eval(&files, reverse_map.as_deref(), geodesic, json),
+        Command::Render(cmd) => render_cmd::run(cmd),
         Command::Spectrum {
             mesh,
             builtin,
@@ -624,9 +635,10 @@ fn distance_solver(
     })
 }
 
-/// The files of `fmaps eval`.
+/// The files of `fmaps eval` and `fmaps render error`: a pair, a map and
+/// its ground truth.
 #[derive(clap::Args)]
-struct EvalFiles {
+pub(crate) struct EvalFiles {
     /// Source mesh A.
     #[arg(long)]
     source: PathBuf,
@@ -645,49 +657,78 @@ struct EvalFiles {
     /// Mirrored ground truth on B (.sym.vts) for the symmetry-aware error.
     #[arg(long)]
     sym_gt_target: Option<PathBuf>,
-    /// The reverse map B -> A, for bijectivity.
-    #[arg(long)]
-    reverse_map: Option<PathBuf>,
 }
 
-fn eval(files: &EvalFiles, method: GeodesicMethod, json: bool) -> Result<(), Failure> {
-    use fmaps::eval::{EvalParams, GroundTruth, evaluate};
-    let t = Instant::now();
-    let a = load(&files.source)?;
-    let b = load(&files.target)?;
-    let read_checked = |p: &Path, n: usize, vts: bool| -> Result<Vec<usize>, Failure> {
-        let v = if vts {
-            mesh_io::read_vts(p)
-        } else {
-            mesh_io::read_map(p)
+/// What [`EvalFiles::load`] reads.
+pub(crate) struct EvalInputs {
+    pub(crate) a: TriMesh,
+    pub(crate) b: TriMesh,
+    pub(crate) t_ab: Vec<usize>,
+    /// Source vertex of each ground-truth point.
+    pub(crate) gt_source: Vec<usize>,
+    pub(crate) gt: fmaps::eval::GroundTruth,
+}
+
+impl EvalFiles {
+    /// Reads and checks the meshes, the map (one 1-based target per
+    /// source vertex) and the ground truth.
+    pub(crate) fn load(&self) -> Result<EvalInputs, Failure> {
+        let files = self;
+        let a = load(&files.source)?;
+        let b = load(&files.target)?;
+        let t_ab = read_indices(&files.map, b.n_vertices(), false)?;
+        if t_ab.len() != a.n_vertices() {
+            return Err(input(anyhow::anyhow!(
+                "{}: {} lines, but the source mesh has {} vertices (one target per source vertex)",
+                files.map.display(),
+                t_ab.len(),
+                a.n_vertices()
+            )));
         }
+        let gt_source = read_indices(&files.gt_source, a.n_vertices(), true)?;
+        let gt = fmaps::eval::GroundTruth::new(
+            gt_source.clone(),
+            read_indices(&files.gt_target, b.n_vertices(), true)?,
+            files
+                .sym_gt_target
+                .as_deref()
+                .map(|p| read_indices(p, b.n_vertices(), true))
+                .transpose()?,
+        )
         .map_err(input)?;
-        mesh_io::check_indices(&v, n, Some(p)).map_err(input)?;
-        Ok(v)
-    };
-    let t_ab = read_checked(&files.map, b.n_vertices(), false)?;
-    if t_ab.len() != a.n_vertices() {
-        return Err(input(anyhow::anyhow!(
-            "{}: {} lines, but the source mesh has {} vertices (one target per source vertex)",
-            files.map.display(),
-            t_ab.len(),
-            a.n_vertices()
-        )));
+        Ok(EvalInputs {
+            a,
+            b,
+            t_ab,
+            gt_source,
+            gt,
+        })
     }
-    let gt = GroundTruth::new(
-        read_checked(&files.gt_source, a.n_vertices(), true)?,
-        read_checked(&files.gt_target, b.n_vertices(), true)?,
-        files
-            .sym_gt_target
-            .as_deref()
-            .map(|p| read_checked(p, b.n_vertices(), true))
-            .transpose()?,
-    )
+}
+
+/// A `.vts` or `.map` file (1-based) as 0-based indices below `n`.
+fn read_indices(p: &Path, n: usize, vts: bool) -> Result<Vec<usize>, Failure> {
+    let v = if vts {
+        mesh_io::read_vts(p)
+    } else {
+        mesh_io::read_map(p)
+    }
     .map_err(input)?;
-    let t_ba = files
-        .reverse_map
-        .as_deref()
-        .map(|p| read_checked(p, a.n_vertices(), false))
+    mesh_io::check_indices(&v, n, Some(p)).map_err(input)?;
+    Ok(v)
+}
+
+fn eval(
+    files: &EvalFiles,
+    reverse_map: Option<&Path>,
+    method: GeodesicMethod,
+    json: bool,
+) -> Result<(), Failure> {
+    use fmaps::eval::{EvalParams, evaluate};
+    let t = Instant::now();
+    let EvalInputs { a, b, t_ab, gt, .. } = files.load()?;
+    let t_ba = reverse_map
+        .map(|p| read_indices(p, a.n_vertices(), false))
         .transpose()?;
     let solver = distance_solver(&b, method)?;
     let r = evaluate(

@@ -23,10 +23,10 @@ pub fn color_transfer(
     transfer(source, target, t_ab, cs, view)
 }
 
-/// A checkerboard on the source, parameterised by its first two
-/// coordinates (a planar projection; `squares` per side), and carried to
-/// the target through `t_ab`: distortion and discontinuities of the map
-/// show as bent or torn squares.
+/// A checkerboard on the source, parameterised by the picture plane of
+/// `view` (a planar projection towards the camera; `squares` per side),
+/// and carried to the target through `t_ab`: distortion and
+/// discontinuities of the map show as bent or torn squares.
 pub fn texture_transfer(
     source: &TriMesh,
     target: &TriMesh,
@@ -34,7 +34,14 @@ pub fn texture_transfer(
     squares: usize,
     view: &View,
 ) -> fmaps_viz::Result<Transfer> {
-    let uv: Vec<[f64; 2]> = source.vertices().iter().map(|p| [p[0], p[1]]).collect();
+    let uv: Vec<[f64; 2]> = source
+        .vertices()
+        .iter()
+        .map(|&p| {
+            let c = view.camera(p);
+            [c[0], c[1]]
+        })
+        .collect();
     transfer(source, target, t_ab, checkerboard(&uv, squares), view)
 }
 
@@ -54,6 +61,56 @@ fn transfer(
         WHITE,
     );
     Ok((img, cs, ct))
+}
+
+/// Per-vertex values from per-point values of a ground truth: `points[r]`
+/// is the source vertex of ground-truth row `r` and `values[r]` its
+/// error. A vertex gets the mean of its rows; vertices without a row
+/// (remeshed datasets leave about a third of the vertices out) take the
+/// value of the nearest vertex that has one, along the mesh edges.
+/// Vertices in components without any row are NaN (drawn grey).
+///
+/// ```
+/// use fmaps::pictures::vertex_values;
+/// let mesh = fmaps::mesh_io::generate::grid(1.0, 1.0, 3, 1); // 4 x 2 vertices
+/// let v = vertex_values(&mesh, &[0, 0, 7], &[1.0, 3.0, 5.0]);
+/// assert_eq!(v[0], 2.0); // mean of its two rows
+/// assert_eq!(v[7], 5.0);
+/// assert!(v.iter().all(|x| *x == 2.0 || *x == 5.0)); // the rest filled
+/// ```
+pub fn vertex_values(mesh: &TriMesh, points: &[usize], values: &[f64]) -> Vec<f64> {
+    let n = mesh.n_vertices();
+    let (mut sum, mut count) = (vec![0.0; n], vec![0usize; n]);
+    for (&i, &e) in points.iter().zip(values) {
+        if i < n && e.is_finite() {
+            sum[i] += e;
+            count[i] += 1;
+        }
+    }
+    let mut out = vec![f64::NAN; n];
+    let mut queue = std::collections::VecDeque::new();
+    for i in 0..n {
+        if count[i] > 0 {
+            out[i] = sum[i] / count[i] as f64;
+            queue.push_back(i);
+        }
+    }
+    let mut adj = vec![Vec::new(); n];
+    for f in mesh.faces() {
+        for k in 0..3 {
+            adj[f[k]].push(f[(k + 1) % 3]);
+            adj[f[(k + 1) % 3]].push(f[k]);
+        }
+    }
+    while let Some(v) = queue.pop_front() {
+        for &w in &adj[v] {
+            if out[w].is_nan() {
+                out[w] = out[v];
+                queue.push_back(w);
+            }
+        }
+    }
+    out
 }
 
 /// The per-vertex error on the source (`errors`, one per source vertex)

@@ -398,3 +398,140 @@ fn demo_matches_the_builtin_pair_and_writes_pictures() {
         .unwrap();
     assert_eq!(out.status.code(), Some(2));
 }
+
+#[test]
+fn render_subcommands_write_pictures_and_report_checked_numbers() {
+    let dir = tmpdir("render");
+    let p = |f: &str| dir.join(f).to_str().unwrap().to_string();
+    let m = fmaps::mesh_io::generate::grid(1.0, 1.0, 4, 4); // 25 vertices, area 1
+    fmaps::mesh_io::write_mesh(dir.join("g.off"), &m).unwrap();
+    let n = m.n_vertices();
+    let all: Vec<usize> = (0..n).collect();
+    fmaps::mesh_io::write_vts(dir.join("g.vts"), &all).unwrap();
+    fmaps::mesh_io::write_map(dir.join("id.map"), &all).unwrap();
+    let shifted: Vec<usize> = (0..n).map(|v| if v % 5 < 4 { v + 1 } else { v }).collect();
+    fmaps::mesh_io::write_map(dir.join("shift.map"), &shifted).unwrap();
+    let json = |args: &[&str]| -> serde_json::Value {
+        let out = fmaps()
+            .arg("render")
+            .args(args)
+            .arg("--json")
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "{args:?}: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+        for f in v["written"].as_array().unwrap() {
+            let bytes = std::fs::read(f.as_str().unwrap()).unwrap();
+            assert!(
+                bytes.starts_with(b"\x89PNG") || bytes.starts_with(b"ply"),
+                "{f}"
+            );
+        }
+        v
+    };
+    let failure = |args: &[&str]| -> String {
+        let out = fmaps().arg("render").args(args).output().unwrap();
+        assert_eq!(out.status.code(), Some(2), "{args:?}");
+        String::from_utf8(out.stderr).unwrap()
+    };
+
+    // Colour transfer through the identity: both PLY files carry the same colours.
+    let v = json(&[
+        "transfer",
+        &p("g.off"),
+        &p("g.off"),
+        "--map",
+        &p("id.map"),
+        "--out",
+        &p("t.png"),
+        "--ply",
+        &p("t"),
+    ]);
+    assert_eq!(v["written"].as_array().unwrap().len(), 3);
+    let colours = |f: &str| -> Vec<String> {
+        let text = std::fs::read_to_string(dir.join(f)).unwrap();
+        let body = text.split("end_header\n").nth(1).unwrap().to_string();
+        body.lines().take(n).map(String::from).collect()
+    };
+    assert_eq!(colours("t-source.ply"), colours("t-target.ply"));
+    json(&[
+        "transfer",
+        &p("g.off"),
+        &p("g.off"),
+        "--map",
+        &p("shift.map"),
+        "--texture",
+        "--up",
+        "z",
+        "--yaw",
+        "-30",
+        "--out",
+        &p("tex.png"),
+    ]);
+
+    // Error picture: the same mean as `fmaps eval` gives for this map (0.2).
+    let v = json(&[
+        "error",
+        "--source",
+        &p("g.off"),
+        "--target",
+        &p("g.off"),
+        "--map",
+        &p("shift.map"),
+        "--gt-source",
+        &p("g.vts"),
+        "--gt-target",
+        &p("g.vts"),
+        "--out",
+        &p("e.png"),
+    ]);
+    assert!((v["mean_error"].as_f64().unwrap() - 0.2).abs() < 1e-12);
+    assert_eq!(v["geodesic"], "exact");
+
+    // Matrix heat map: 5 of the 9 entries are below 0.1 in magnitude.
+    std::fs::write(dir.join("C.txt"), "1 0 0.05\n0 -1 0.2\n0 0 1\n").unwrap();
+    let v = json(&["fmap", &p("C.txt"), "--out", &p("C.png")]);
+    assert_eq!((v["rows"].as_u64(), v["cols"].as_u64()), (Some(3), Some(3)));
+    assert!((v["sparsity"].as_f64().unwrap() - 5.0 / 9.0).abs() < 1e-15);
+    std::fs::write(dir.join("bad.txt"), "1 0\n0 x\n").unwrap();
+    assert!(failure(&["fmap", &p("bad.txt")]).contains("bad.txt:2: `x` is not a number"));
+    std::fs::write(dir.join("ragged.txt"), "1 0\n0\n").unwrap();
+    assert!(failure(&["fmap", &p("ragged.txt")]).contains("ragged.txt:2: 1 entries"));
+
+    // Scalar field: the colour range defaults to the values' range.
+    let xs: String = m.vertices().iter().map(|q| format!("{}\n", q[0])).collect();
+    std::fs::write(dir.join("x.txt"), &xs).unwrap();
+    let v = json(&[
+        "scalar",
+        &p("g.off"),
+        "--values",
+        &p("x.txt"),
+        "--out",
+        &p("x.png"),
+    ]);
+    assert_eq!(
+        (v["vmin"].as_f64(), v["vmax"].as_f64()),
+        (Some(0.0), Some(1.0))
+    );
+    std::fs::write(dir.join("short.txt"), "1\n2\n").unwrap();
+    assert!(
+        failure(&["scalar", &p("g.off"), "--values", &p("short.txt")])
+            .contains("2 values, but the mesh has 25 vertices")
+    );
+
+    // Spectral embedding of the unit sphere: the first non-constant
+    // eigenvalues are l(l+1) = 2 (up to discretisation).
+    let s = fmaps::mesh_io::generate::icosphere(1.0, 3);
+    fmaps::mesh_io::write_mesh(dir.join("s.off"), &s).unwrap();
+    let v = json(&["embedding", &p("s.off"), "--out", &p("emb.png")]);
+    for e in v["eigenvalues"].as_array().unwrap() {
+        assert!((e.as_f64().unwrap() - 2.0).abs() < 0.02, "{e}");
+    }
+    assert!(failure(&["embedding", &p("s.off"), "--eigs", "1,2"]).contains("three indices"));
+    assert!(failure(&["error", "--source", &p("g.off")]).contains("--target"));
+    std::fs::remove_dir_all(&dir).unwrap();
+}

@@ -60,8 +60,10 @@ pub fn position_colors(vertices: &[[f64; 3]]) -> Vec<[u8; 3]> {
 
 /// A checkerboard texture on a parameterisation: vertex `i` with
 /// coordinates `uv[i]` is light or dark by the parity of
-/// `floor(u * squares) + floor(v * squares)` (coordinates are normalised
-/// to their range first).
+/// `floor(u * squares) + floor(v * squares)`, with both coordinates
+/// measured from their minimum in units of the longer side of the
+/// bounding rectangle (so the squares are square and `squares` of them
+/// span the longer side).
 pub fn checkerboard(uv: &[[f64; 2]], squares: usize) -> Vec<[u8; 3]> {
     let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
     for p in uv {
@@ -71,9 +73,10 @@ pub fn checkerboard(uv: &[[f64; 2]], squares: usize) -> Vec<[u8; 3]> {
         }
     }
     let n = squares.max(1) as f64;
+    let side = (hi[0] - lo[0]).max(hi[1] - lo[1]).max(1e-300);
     uv.iter()
         .map(|p| {
-            let cell = |d: usize| ((p[d] - lo[d]) / (hi[d] - lo[d]).max(1e-300) * n).floor() as i64;
+            let cell = |d: usize| ((p[d] - lo[d]) / side * n).floor() as i64;
             if (cell(0) + cell(1)).rem_euclid(2) == 0 {
                 [235, 235, 225]
             } else {

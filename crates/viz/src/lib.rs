@@ -35,7 +35,7 @@ mod render;
 pub use color::{checkerboard, colorbar, colormap, position_colors, push_colors, scalar_colors};
 pub use image::{BLACK, Image, WHITE};
 pub use ply::{colored_ply, write_colored_ply};
-pub use render::{View, render};
+pub use render::{Axis, View, render};
 
 /// Errors of this crate.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]

@@ -5,9 +5,25 @@
 use crate::image::Image;
 use crate::{Error, Result};
 
+/// A coordinate axis.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Axis {
+    /// The x axis.
+    X,
+    /// The y axis (the default "up": FAUST, the built-in shapes).
+    #[default]
+    Y,
+    /// The z axis ("up" in TOSCA and many scans).
+    Z,
+}
+
 /// Camera and picture settings.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct View {
+    /// The shape's vertical axis: it is drawn pointing up, and the camera
+    /// looks at the shape along one of the other two axes (for `Y`, along
+    /// -z; for `Z`, along +y; for `X`, along -z).
+    pub up: Axis,
     /// Picture width in pixels.
     pub width: usize,
     /// Picture height in pixels.
@@ -25,6 +41,7 @@ pub struct View {
 impl Default for View {
     fn default() -> Self {
         View {
+            up: Axis::Y,
             width: 480,
             height: 480,
             yaw: 0.0,
@@ -37,8 +54,22 @@ impl Default for View {
 
 impl View {
     /// The vertex in camera coordinates (x right, y up, z towards the
-    /// viewer).
-    fn transform(&self, p: [f64; 3]) -> [f64; 3] {
+    /// viewer, before fitting to the picture): the `up` axis is turned to
+    /// y, then `yaw` and `pitch` are applied.
+    ///
+    /// ```
+    /// use fmaps_viz::{Axis, View};
+    /// let view = View { up: Axis::Z, ..View::default() };
+    /// // z-up shapes stand upright: +z becomes up, +y goes away from the viewer.
+    /// assert_eq!(view.camera([0.0, 0.0, 1.0]), [0.0, 1.0, 0.0]);
+    /// assert_eq!(view.camera([0.0, 1.0, 0.0]), [0.0, 0.0, -1.0]);
+    /// ```
+    pub fn camera(&self, p: [f64; 3]) -> [f64; 3] {
+        let p = match self.up {
+            Axis::Y => p,
+            Axis::Z => [p[0], p[2], -p[1]],
+            Axis::X => [-p[1], p[0], p[2]],
+        };
         let (sy, cy) = self.yaw.sin_cos();
         let (sp, cp) = self.pitch.sin_cos();
         let x = cy * p[0] + sy * p[2];
@@ -80,7 +111,7 @@ pub fn render(
     if vertices.is_empty() {
         return Ok(img);
     }
-    let cam: Vec<[f64; 3]> = vertices.iter().map(|&p| view.transform(p)).collect();
+    let cam: Vec<[f64; 3]> = vertices.iter().map(|&p| view.camera(p)).collect();
     let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
     for p in &cam {
         for d in 0..2 {

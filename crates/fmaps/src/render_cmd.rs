@@ -1,0 +1,527 @@
+//! `fmaps render ...`: pictures of maps and shapes.
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use clap::{Subcommand, ValueEnum};
+use fmaps::mesh_io::TriMesh;
+use fmaps::viz::{self, Axis, Image, View, plot};
+use serde_json::json;
+
+use crate::{EvalFiles, EvalInputs, Failure, GeodesicMethod, emit, input, load, runtime};
+
+/// Camera options shared by the mesh pictures.
+#[derive(clap::Args, Clone)]
+pub(crate) struct ViewArgs {
+    /// Width of one view in pixels.
+    #[arg(long, default_value_t = 480)]
+    width: usize,
+    /// Height of one view in pixels.
+    #[arg(long, default_value_t = 480)]
+    height: usize,
+    /// The shapes' vertical axis (FAUST and the built-in shapes: y;
+    /// TOSCA: z).
+    #[arg(long, value_enum, default_value_t = Up::Y)]
+    up: Up,
+    /// Turn about the vertical axis, degrees (0: look at the front).
+    #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
+    yaw: f64,
+    /// Tilt towards the viewer after the turn, degrees.
+    #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
+    pitch: f64,
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+enum Up {
+    X,
+    Y,
+    Z,
+}
+
+impl ViewArgs {
+    fn view(&self) -> Result<View, Failure> {
+        if !(16..=8192).contains(&self.width) || !(16..=8192).contains(&self.height) {
+            return Err(input(anyhow::anyhow!(
+                "--width {} --height {}: use 16..=8192 pixels",
+                self.width,
+                self.height
+            )));
+        }
+        Ok(View {
+            up: match self.up {
+                Up::X => Axis::X,
+                Up::Y => Axis::Y,
+                Up::Z => Axis::Z,
+            },
+            width: self.width,
+            height: self.height,
+            yaw: self.yaw.to_radians(),
+            pitch: self.pitch.to_radians(),
+            ..View::default()
+        })
+    }
+}
+
+#[derive(Subcommand)]
+pub(crate) enum RenderCommand {
+    /// Colour (or texture) transfer: the source coloured by position on
+    /// the left, the target coloured through the map on the right; where
+    /// the colours agree, the map is right.
+    #[command(after_help = "Examples:\n  \
+fmaps render transfer tr_reg_000.off tr_reg_001.off --map A_B.map --out transfer.png\n  \
+fmaps render transfer cat0.off cat1.off --map A_B.map --up z --yaw 90 --texture --ply cat\n\n\
+--texture draws a checkerboard projected from the camera onto the source instead of\n\
+position colours; --ply P also writes P-source.ply and P-target.ply with vertex colours.")]
+    Transfer {
+        /// Source mesh A.
+        source: PathBuf,
+        /// Target mesh B.
+        target: PathBuf,
+        /// The map A -> B (.map: one 1-based B vertex per A vertex).
+        #[arg(long)]
+        map: PathBuf,
+        /// A checkerboard texture instead of position colours.
+        #[arg(long)]
+        texture: bool,
+        /// Checkerboard squares along the longer side of the picture.
+        #[arg(long, default_value_t = 10)]
+        squares: usize,
+        /// Output PNG.
+        #[arg(long, default_value = "transfer.png")]
+        out: PathBuf,
+        /// Also write coloured PLY: PREFIX-source.ply, PREFIX-target.ply.
+        #[arg(long, value_name = "PREFIX")]
+        ply: Option<PathBuf>,
+        #[command(flatten)]
+        view: ViewArgs,
+        /// Print one JSON object.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Heat map of a map's geodesic error on the source, with a colour
+    /// bar (errors / sqrt(area of B), as `fmaps eval`).
+    #[command(after_help = "Example:\n  \
+fmaps render error --source A.off --target B.off --map A_B.map \\\n      \
+--gt-source corres/A.vts --gt-target corres/B.vts --vmax 0.1 --out error.png\n\n\
+Ground truth covers only some vertices of remeshed datasets; the others show the error of the\n\
+nearest covered vertex. With --sym-gt-target the symmetry-aware error is drawn.")]
+    Error {
+        #[command(flatten)]
+        files: EvalFiles,
+        /// Geodesic method.
+        #[arg(long, value_enum, default_value_t = GeodesicMethod::Exact)]
+        geodesic: GeodesicMethod,
+        /// Error at the top of the colour scale (larger errors saturate).
+        #[arg(long, default_value_t = 0.1)]
+        vmax: f64,
+        /// Output PNG.
+        #[arg(long, default_value = "error.png")]
+        out: PathBuf,
+        /// Also write the coloured source as PLY.
+        #[arg(long)]
+        ply: Option<PathBuf>,
+        #[command(flatten)]
+        view: ViewArgs,
+        /// Print one JSON object.
+        #[arg(long)]
+        json: bool,
+    },
+    /// A functional map as a heat map (red positive, blue negative; the
+    /// seed's Figure 1).
+    #[command(after_help = "Example:\n  \
+fmaps match A.off B.off --save-fmap C.txt && fmaps render fmap C.txt --out fmap.png\n\n\
+The matrix file has one row per line, entries separated by spaces (as --save-fmap writes).")]
+    Fmap {
+        /// Matrix as text.
+        matrix: PathBuf,
+        /// |C_ij| at the top of the colour scale.
+        #[arg(long, default_value_t = 1.0)]
+        vmax: f64,
+        /// Title drawn above the matrix.
+        #[arg(long)]
+        title: Option<String>,
+        /// Output PNG.
+        #[arg(long, default_value = "fmap.png")]
+        out: PathBuf,
+        /// Print one JSON object (size, sparsity).
+        #[arg(long)]
+        json: bool,
+    },
+    /// The shape drawn with three Laplace–Beltrami eigenfunctions as its
+    /// coordinates, coloured by its original position (the seed's
+    /// Figure 10).
+    #[command(
+        after_help = "Example:\n  fmaps render embedding tr_reg_000.off --eigs 1,2,3 --out embedding.png"
+    )]
+    Embedding {
+        /// Mesh file.
+        mesh: PathBuf,
+        /// Three eigenfunction indices (0 is the constant one).
+        #[arg(
+            long,
+            value_delimiter = ',',
+            default_value = "1,2,3",
+            value_name = "I,J,K"
+        )]
+        eigs: Vec<usize>,
+        /// Output PNG.
+        #[arg(long, default_value = "embedding.png")]
+        out: PathBuf,
+        /// Camera (--up picks which eigenfunction is drawn vertical).
+        #[command(flatten)]
+        view: ViewArgs,
+        /// Print one JSON object.
+        #[arg(long)]
+        json: bool,
+    },
+    /// A per-vertex scalar field (one number per line, e.g. the output of
+    /// `fmaps geodesic --out`) with a colour bar.
+    #[command(after_help = "Example:\n  \
+fmaps geodesic tr_reg_000.off --source 0 --out dist.txt\n  \
+fmaps render scalar tr_reg_000.off --values dist.txt --title distance --out dist.png")]
+    Scalar {
+        /// Mesh file.
+        mesh: PathBuf,
+        /// Values, one per vertex and line (`inf`/`nan` are drawn grey).
+        #[arg(long)]
+        values: PathBuf,
+        /// Bottom of the colour scale (default: the smallest finite value).
+        #[arg(long, allow_hyphen_values = true)]
+        vmin: Option<f64>,
+        /// Top of the colour scale (default: the largest finite value).
+        #[arg(long, allow_hyphen_values = true)]
+        vmax: Option<f64>,
+        /// Colour bar title.
+        #[arg(long, default_value = "")]
+        title: String,
+        /// Output PNG.
+        #[arg(long, default_value = "scalar.png")]
+        out: PathBuf,
+        /// Also write the coloured mesh as PLY.
+        #[arg(long)]
+        ply: Option<PathBuf>,
+        #[command(flatten)]
+        view: ViewArgs,
+        /// Print one JSON object.
+        #[arg(long)]
+        json: bool,
+    },
+}
+
+pub(crate) fn run(cmd: RenderCommand) -> Result<(), Failure> {
+    let t = Instant::now();
+    let mut written = Vec::new();
+    let mut extra = serde_json::Map::new();
+    let mut o = String::new();
+    let json = match cmd {
+        RenderCommand::Transfer {
+            source,
+            target,
+            map,
+            texture,
+            squares,
+            out,
+            ply,
+            view,
+            json,
+        } => {
+            let view = view.view()?;
+            let (a, b) = (load(&source)?, load(&target)?);
+            let t_ab = crate::read_indices(&map, b.n_vertices(), false)?;
+            if t_ab.len() != a.n_vertices() {
+                return Err(input(anyhow::anyhow!(
+                    "{}: {} lines, but {} has {} vertices (one target per source vertex)",
+                    map.display(),
+                    t_ab.len(),
+                    source.display(),
+                    a.n_vertices()
+                )));
+            }
+            let (img, cs, ct) = if texture {
+                fmaps::pictures::texture_transfer(&a, &b, &t_ab, squares.max(1), &view)
+            } else {
+                fmaps::pictures::color_transfer(&a, &b, &t_ab, &view)
+            }
+            .map_err(runtime)?;
+            save(&img, &out, &mut written)?;
+            if let Some(prefix) = ply {
+                for (mesh, colors, side) in [(&a, &cs, "source"), (&b, &ct, "target")] {
+                    let p = PathBuf::from(format!("{}-{side}.ply", prefix.display()));
+                    save_ply(mesh, colors, &p, &mut written)?;
+                }
+            }
+            json
+        }
+        RenderCommand::Error {
+            files,
+            geodesic,
+            vmax,
+            out,
+            ply,
+            view,
+            json,
+        } => {
+            let view = view.view()?;
+            positive("--vmax", vmax)?;
+            let EvalInputs {
+                a,
+                b,
+                t_ab,
+                gt_source,
+                gt,
+            } = files.load()?;
+            let solver = crate::distance_solver(&b, geodesic)?;
+            let r = fmaps::eval::evaluate(
+                &b,
+                solver.as_ref(),
+                &t_ab,
+                &gt,
+                None,
+                &fmaps::eval::EvalParams::default(),
+            )
+            .map_err(input)?;
+            let (errors, title) = match &r.sym_errors {
+                Some(s) => (s, "symmetry-aware error"),
+                None => (&r.errors, "geodesic error"),
+            };
+            let per_vertex = fmaps::pictures::vertex_values(&a, &gt_source, errors);
+            let img =
+                fmaps::pictures::error_map(&a, &per_vertex, vmax, title, &view).map_err(runtime)?;
+            save(&img, &out, &mut written)?;
+            if let Some(p) = ply {
+                save_ply(
+                    &a,
+                    &viz::scalar_colors(&per_vertex, 0.0, vmax),
+                    &p,
+                    &mut written,
+                )?;
+            }
+            extra.insert("mean_error".into(), json!(r.mean_error));
+            extra.insert("sym_mean_error".into(), json!(r.sym_mean_error));
+            extra.insert("geodesic".into(), json!(r.geodesic));
+            if !json {
+                let sym = r
+                    .sym_mean_error
+                    .map(|s| format!(", symmetry-aware {:.3}", 100.0 * s))
+                    .unwrap_or_default();
+                crate::outln!(
+                    o,
+                    "mean error x100 {:.3}{sym} ({} geodesics)",
+                    100.0 * r.mean_error,
+                    r.geodesic
+                );
+            }
+            json
+        }
+        RenderCommand::Fmap {
+            matrix,
+            vmax,
+            title,
+            out,
+            json,
+        } => {
+            positive("--vmax", vmax)?;
+            let c = read_matrix(&matrix)?;
+            let title = title.unwrap_or_else(|| {
+                format!(
+                    "{} ({} x {})",
+                    matrix
+                        .file_name()
+                        .map_or(String::new(), |s| s.to_string_lossy().into_owned()),
+                    c.nrows(),
+                    c.ncols()
+                )
+            });
+            save(&plot::heatmap(&title, &c, vmax), &out, &mut written)?;
+            let small = c.iter().filter(|x| x.abs() < 0.1).count();
+            let sparsity = small as f64 / c.len().max(1) as f64;
+            extra.insert("rows".into(), json!(c.nrows()));
+            extra.insert("cols".into(), json!(c.ncols()));
+            extra.insert("sparsity".into(), json!(sparsity));
+            if !json {
+                crate::outln!(
+                    o,
+                    "{} x {}; {:.1}% of entries below 0.1 in magnitude",
+                    c.nrows(),
+                    c.ncols(),
+                    100.0 * sparsity
+                );
+            }
+            json
+        }
+        RenderCommand::Embedding {
+            mesh,
+            eigs,
+            out,
+            view,
+            json,
+        } => {
+            let view = view.view()?;
+            let which: [usize; 3] = eigs.as_slice().try_into().map_err(|_| {
+                input(anyhow::anyhow!(
+                    "--eigs takes three indices, e.g. 1,2,3 (got {})",
+                    eigs.len()
+                ))
+            })?;
+            let m = load(&mesh)?;
+            let k = which.iter().max().copied().unwrap_or(0) + 1;
+            if k >= m.n_vertices() {
+                return Err(input(anyhow::anyhow!(
+                    "--eigs: index {} needs more eigenpairs than {} has vertices",
+                    k - 1,
+                    mesh.display()
+                )));
+            }
+            let s = fmaps::spectrum(&m, k, &fmaps::SpectrumParams::default()).map_err(runtime)?;
+            let img =
+                fmaps::pictures::spectral_embedding(&m, &s.basis, which, &view).map_err(runtime)?;
+            save(&img, &out, &mut written)?;
+            extra.insert(
+                "eigenvalues".into(),
+                json!(which.map(|j| s.basis.eigenvalues[j])),
+            );
+            json
+        }
+        RenderCommand::Scalar {
+            mesh,
+            values,
+            vmin,
+            vmax,
+            title,
+            out,
+            ply,
+            view,
+            json,
+        } => {
+            let view = view.view()?;
+            let m = load(&mesh)?;
+            let v = read_values(&values, m.n_vertices())?;
+            let finite = v.iter().copied().filter(|x| x.is_finite());
+            let lo = vmin.unwrap_or_else(|| finite.clone().fold(f64::INFINITY, f64::min));
+            let hi = vmax.unwrap_or_else(|| finite.fold(f64::NEG_INFINITY, f64::max));
+            if !lo.is_finite() || !hi.is_finite() || hi <= lo {
+                return Err(input(anyhow::anyhow!(
+                    "{}: no usable colour range (vmin {lo}, vmax {hi}); give --vmin/--vmax",
+                    values.display()
+                )));
+            }
+            let colors = viz::scalar_colors(&v, lo, hi);
+            let img = viz::render(m.vertices(), m.faces(), &colors, &view).map_err(runtime)?;
+            let bar = viz::colorbar(view.height, lo, hi, &title);
+            save(&Image::hstack(&[img, bar], viz::WHITE), &out, &mut written)?;
+            if let Some(p) = ply {
+                save_ply(&m, &colors, &p, &mut written)?;
+            }
+            extra.insert("vmin".into(), json!(lo));
+            extra.insert("vmax".into(), json!(hi));
+            json
+        }
+    };
+    let seconds = t.elapsed().as_secs_f64();
+    if json {
+        extra.insert("written".into(), json!(written));
+        extra.insert("seconds".into(), json!(seconds));
+        return emit(&format!("{}\n", serde_json::Value::Object(extra)));
+    }
+    for p in &written {
+        crate::outln!(o, "wrote {p}");
+    }
+    emit(&o)
+}
+
+fn positive(flag: &str, x: f64) -> Result<(), Failure> {
+    if x.is_finite() && x > 0.0 {
+        Ok(())
+    } else {
+        Err(input(anyhow::anyhow!("{flag} {x}: must be positive")))
+    }
+}
+
+fn save(img: &Image, path: &Path, written: &mut Vec<String>) -> Result<(), Failure> {
+    img.save_png(path)
+        .map_err(|e| runtime(anyhow::anyhow!("{}: {e}", path.display())))?;
+    written.push(path.display().to_string());
+    Ok(())
+}
+
+fn save_ply(
+    mesh: &TriMesh,
+    colors: &[[u8; 3]],
+    path: &Path,
+    written: &mut Vec<String>,
+) -> Result<(), Failure> {
+    viz::write_colored_ply(path, mesh.vertices(), mesh.faces(), colors)
+        .map_err(|e| runtime(anyhow::anyhow!("{}: {e}", path.display())))?;
+    written.push(path.display().to_string());
+    Ok(())
+}
+
+fn read_text(path: &Path) -> Result<String, Failure> {
+    std::fs::read_to_string(path).map_err(|e| input(anyhow::anyhow!("{}: {e}", path.display())))
+}
+
+/// A dense matrix, one row per non-empty line.
+fn read_matrix(path: &Path) -> Result<nalgebra::DMatrix<f64>, Failure> {
+    let text = read_text(path)?;
+    let mut rows: Vec<Vec<f64>> = Vec::new();
+    for (i, line) in text.lines().enumerate() {
+        if line.trim().is_empty() {
+            continue;
+        }
+        let row = line
+            .split(|c: char| c.is_whitespace() || c == ',')
+            .filter(|s| !s.is_empty())
+            .map(|s| parse_number(s, path, i + 1))
+            .collect::<Result<Vec<f64>, Failure>>()?;
+        if let Some(first) = rows.first() {
+            if row.len() != first.len() {
+                return Err(input(anyhow::anyhow!(
+                    "{}:{}: {} entries, but the first row has {}",
+                    path.display(),
+                    i + 1,
+                    row.len(),
+                    first.len()
+                )));
+            }
+        }
+        rows.push(row);
+    }
+    if rows.is_empty() {
+        return Err(input(anyhow::anyhow!("{}: no rows", path.display())));
+    }
+    let (r, c) = (rows.len(), rows[0].len());
+    Ok(nalgebra::DMatrix::from_row_iterator(
+        r,
+        c,
+        rows.into_iter().flatten(),
+    ))
+}
+
+/// One value per vertex.
+fn read_values(path: &Path, n: usize) -> Result<Vec<f64>, Failure> {
+    let text = read_text(path)?;
+    let mut v = Vec::with_capacity(n);
+    for (i, line) in text.lines().enumerate() {
+        let s = line.trim();
+        if !s.is_empty() {
+            v.push(parse_number(s, path, i + 1)?);
+        }
+    }
+    if v.len() != n {
+        return Err(input(anyhow::anyhow!(
+            "{}: {} values, but the mesh has {n} vertices (one per line)",
+            path.display(),
+            v.len()
+        )));
+    }
+    Ok(v)
+}
+
+fn parse_number(s: &str, path: &Path, line: usize) -> Result<f64, Failure> {
+    s.parse::<f64>().map_err(|_| {
+        input(anyhow::anyhow!(
+            "{}:{line}: `{s}` is not a number",
+            path.display()
+        ))
+    })
+}
