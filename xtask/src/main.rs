@@ -8,6 +8,7 @@
 //! - `cargo xtask descriptor-check`: HKS/WKS against pyFM's.
 //! - `cargo xtask pictures`: pictures of one FAUST and one TOSCA pair in
 //!   `docs/pictures/`.
+//! - `cargo xtask publish-check`: crates.io readiness of every crate.
 //! - `cargo xtask geodesic-check`: exact geodesics against tvb-gdist (largest
 //!   relative difference, time per source).
 
@@ -20,6 +21,7 @@ mod figures;
 mod fit_check;
 mod geodesic_check;
 mod pictures;
+mod publish_check;
 mod util;
 
 use clap::{Parser, Subcommand};
@@ -51,6 +53,8 @@ enum Command {
     Figures(figures::Args),
     /// Pictures of one test pair per collection (transfer, errors, C, embedding, curves), into docs/pictures/.
     Pictures(pictures::Args),
+    /// crates.io readiness of every crate: metadata, licences, docs, `cargo publish --dry-run` in dependency order.
+    PublishCheck(publish_check::Args),
 }
 
 fn main() -> anyhow::Result<()> {
@@ -62,6 +66,7 @@ fn main() -> anyhow::Result<()> {
         Command::FitCheck(a) => fit_check::fit_check(&a),
         Command::Figures(a) => figures::figures(&a),
         Command::Pictures(a) => pictures::pictures(&a),
+        Command::PublishCheck(a) => publish_check::publish_check(&a),
         Command::BenchMatch(a) => bench_match::bench_match(&a),
         Command::BenchRefine(a) => bench_refine::bench_refine(&a),
     }
