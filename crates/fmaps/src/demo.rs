@@ -13,26 +13,14 @@ use serde_json::json;
 
 use crate::{Failure, emit, outln, runtime};
 
-pub(crate) fn run(
-    out_dir: &Path,
-    subdivisions: u32,
-    threads: usize,
-    as_json: bool,
-) -> Result<(), Failure> {
+pub(crate) fn run(out_dir: &Path, subdivisions: u32, as_json: bool) -> Result<(), Failure> {
     if !(2..=6).contains(&subdivisions) {
         return Err(crate::input(anyhow::anyhow!(
             "--subdivisions {subdivisions}: use 2..=6 (4 = 2,562 vertices, 5 = 10,242)"
         )));
     }
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(threads)
-        .build()
-        .map_err(runtime)?;
-    pool.install(|| run_inner(out_dir, subdivisions, as_json))
-}
-
-fn run_inner(out_dir: &Path, subdivisions: u32, as_json: bool) -> Result<(), Failure> {
     let t0 = Instant::now();
+    let spinner = crate::Spinner::new("generating the built-in pair");
     let pair = creature_pair(subdivisions);
     let (a, b) = (&pair.source, &pair.target);
     let n = a.n_vertices();
@@ -40,13 +28,16 @@ fn run_inner(out_dir: &Path, subdivisions: u32, as_json: bool) -> Result<(), Fai
         refine: Refinement::zoomout(50, 150, 5),
         ..MatchParams::default()
     };
+    spinner.stage("Laplacians and eigenbases of both shapes");
     let t = Instant::now();
     let mut single = params.clone();
     single.spectrum.threads = 1;
     let (pa, pb) = rayon::join(|| prepare(a, &single), || prepare(b, &single));
     let (pa, pb) = (pa.map_err(runtime)?, pb.map_err(runtime)?);
     let spectra = t.elapsed().as_secs_f64();
+    spinner.stage("descriptors, functional map, ZoomOut");
     let r = match_prepared(&pa, &pb, &params).map_err(runtime)?;
+    spinner.stage("exact geodesic errors");
 
     let t = Instant::now();
     let gt = GroundTruth::new((0..n).collect(), pair.truth.clone(), None).map_err(runtime)?;
@@ -58,7 +49,7 @@ fn run_inner(out_dir: &Path, subdivisions: u32, as_json: bool) -> Result<(), Fai
     let (init, refined) = (eval(&r.t_ab_init)?, eval(&r.t_ab)?);
     let eval_seconds = t.elapsed().as_secs_f64();
 
-    // Pictures.
+    spinner.stage("pictures");
     std::fs::create_dir_all(out_dir)
         .map_err(|e| runtime(anyhow::anyhow!("{}: {e}", out_dir.display())))?;
     let view = View::default();
@@ -123,6 +114,7 @@ fn run_inner(out_dir: &Path, subdivisions: u32, as_json: bool) -> Result<(), Fai
         written.push(p.display().to_string());
     }
     let total = t0.elapsed().as_secs_f64();
+    drop(spinner);
 
     let st = &r.times;
     if as_json {

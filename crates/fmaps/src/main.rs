@@ -23,6 +23,10 @@ mod render_cmd;
 struct Cli {
     #[command(subcommand)]
     command: Command,
+    /// Threads for every parallel stage (0 = all cores); also accepted
+    /// after the subcommand.
+    #[arg(long, global = true, default_value_t = 0)]
+    threads: usize,
 }
 
 #[derive(Subcommand)]
@@ -43,9 +47,6 @@ fmap.png, spectral-embedding.png, curves.png and source.ply / target.ply (colour
         /// vertices, 5 = 10,242).
         #[arg(long, default_value_t = 4)]
         subdivisions: u32,
-        /// Threads (0 = all cores).
-        #[arg(long, default_value_t = 0)]
-        threads: usize,
         /// Print one JSON object.
         #[arg(long)]
         json: bool,
@@ -97,9 +98,6 @@ a 50 x 50 map, weights descr 0.1, lap 1e-3 (resolvent mask), dcomm 1, orientatio
         /// Mass matrix.
         #[arg(long, value_enum, default_value_t = Mass::Lumped)]
         mass: Mass,
-        /// Threads for the eigensolver.
-        #[arg(long, default_value_t = 1)]
-        threads: usize,
         /// Block size of the native solver (tuning; default chosen by
         /// benchmark).
         #[arg(long)]
@@ -212,9 +210,6 @@ struct MatchArgs {
     /// Write C_BA (k x k, functions on B to functions on A) as text.
     #[arg(long)]
     save_fmap: Option<PathBuf>,
-    /// Threads (0 = all cores).
-    #[arg(long, default_value_t = 0)]
-    threads: usize,
     /// Print one JSON object (stage times, map metrics, energy).
     #[arg(long)]
     json: bool,
@@ -238,6 +233,43 @@ enum GeodesicMethod {
     Heat,
     /// Shortest paths along edges (an upper bound).
     Dijkstra,
+}
+
+impl GeodesicMethod {
+    fn name(self) -> &'static str {
+        match self {
+            GeodesicMethod::Exact => "exact",
+            GeodesicMethod::Heat => "heat-method",
+            GeodesicMethod::Dijkstra => "Dijkstra",
+        }
+    }
+}
+
+/// A spinner with the current stage and the elapsed time on stderr, drawn
+/// only when stderr is a terminal (never in pipes, files or tests);
+/// cleared when dropped.
+pub(crate) struct Spinner(indicatif::ProgressBar);
+
+impl Spinner {
+    pub(crate) fn new(stage: impl Into<std::borrow::Cow<'static, str>>) -> Spinner {
+        let bar = indicatif::ProgressBar::new_spinner();
+        if let Ok(style) = indicatif::ProgressStyle::with_template("{spinner} {elapsed:>3} {msg}") {
+            bar.set_style(style);
+        }
+        bar.set_message(stage);
+        bar.enable_steady_tick(std::time::Duration::from_millis(120));
+        Spinner(bar)
+    }
+
+    pub(crate) fn stage(&self, stage: &str) {
+        self.0.set_message(stage.to_string());
+    }
+}
+
+impl Drop for Spinner {
+    fn drop(&mut self) {
+        self.0.finish_and_clear();
+    }
 }
 
 #[derive(Clone, Copy, ValueEnum)]
@@ -286,13 +318,19 @@ fn runtime<E: Into<anyhow::Error>>(e: E) -> Failure {
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
+    if let Err(e) = rayon::ThreadPoolBuilder::new()
+        .num_threads(cli.threads)
+        .build_global()
+    {
+        eprintln!("error: --threads {}: {e}", cli.threads);
+        return ExitCode::from(1);
+    }
     let result = match cli.command {
         Command::Demo {
             out,
             subdivisions,
-            threads,
             json,
-        } => demo::run(&out, subdivisions, threads, json),
+        } => demo::run(&out, subdivisions, json),
         Command::Info { mesh, json } => info(&mesh, json),
         Command::Match(args) => match_cmd(&args),
         Command::Geodesic {
@@ -315,7 +353,6 @@ fn main() -> ExitCode {
             k,
             backend,
             mass,
-            threads,
             block_size,
             json,
             out,
@@ -325,7 +362,6 @@ fn main() -> ExitCode {
             k,
             backend,
             mass,
-            threads,
             block_size,
             json,
             out.as_deref(),
@@ -440,7 +476,6 @@ fn spectrum(
     k: usize,
     backend: Backend,
     mass: Mass,
-    threads: usize,
     block_size: Option<usize>,
     json: bool,
     out: Option<&Path>,
@@ -465,10 +500,13 @@ fn spectrum(
             Mass::Voronoi => MassKind::Voronoi,
         },
         backend,
-        threads,
+        threads: rayon::current_num_threads(),
         block_size,
     };
-    let s = fmaps::spectrum(&mesh, k, &params).map_err(|e| match e {
+    let spinner = Spinner::new(format!("{k} eigenpairs of {} vertices", mesh.n_vertices()));
+    let s = fmaps::spectrum(&mesh, k, &params);
+    drop(spinner);
+    let s = s.map_err(|e| match e {
         fmaps::eigensolve::Error::InvalidK { .. }
         | fmaps::eigensolve::Error::NonPositiveMass { .. }
         | fmaps::eigensolve::Error::InvalidParameter(_) => input(e),
@@ -496,7 +534,7 @@ fn spectrum(
             "k": k,
             "backend": b.report.backend,
             "shift": b.report.shift,
-            "threads": threads,
+            "threads": rayon::current_num_threads(),
             "seconds": { "load": load_s, "laplacian": s.times.laplacian, "factorization": s.times.factorization, "eigensolve": s.times.eigensolve },
             "restarts": b.report.restarts,
             "operator_applications": b.report.operator_applications,
@@ -730,6 +768,7 @@ fn eval(
     let t_ba = reverse_map
         .map(|p| read_indices(p, a.n_vertices(), false))
         .transpose()?;
+    let spinner = Spinner::new(format!("{} geodesics on the target", method.name()));
     let solver = distance_solver(&b, method)?;
     let r = evaluate(
         &b,
@@ -740,6 +779,7 @@ fn eval(
         &EvalParams::default(),
     )
     .map_err(input)?;
+    drop(spinner);
     let seconds = t.elapsed().as_secs_f64();
     if json {
         let v = json!({
@@ -891,7 +931,7 @@ fn refinement(args: &MatchArgs) -> Result<fmaps::pipeline::Refinement, Failure> 
 }
 
 fn match_cmd(args: &MatchArgs) -> Result<(), Failure> {
-    use fmaps::pipeline::{MatchError, MatchParams, match_shapes};
+    use fmaps::pipeline::{MatchError, MatchParams, match_shapes_with_progress};
     let t = Instant::now();
     let a = load(&args.source)?;
     let b = load(&args.target)?;
@@ -912,16 +952,14 @@ fn match_cmd(args: &MatchArgs) -> Result<(), Failure> {
     params.starts = args.starts.clone();
     params.refine = refinement(args)?;
     params.k_process = params.k_process.max(params.refine.k_needed());
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(args.threads)
-        .build()
-        .map_err(runtime)?;
-    let r = pool
-        .install(|| match_shapes(&a, &b, &params))
-        .map_err(|e| match e {
+    let spinner = Spinner::new("matching");
+    let r = match_shapes_with_progress(&a, &b, &params, &|s| spinner.stage(s)).map_err(
+        |e| match e {
             MatchError::InvalidParameter(_) => input(e),
             e => runtime(e),
-        })?;
+        },
+    )?;
+    drop(spinner);
     if let Some(out) = &args.out {
         mesh_io::write_map(out, &r.t_ab).map_err(runtime)?;
     }

@@ -350,7 +350,19 @@ pub fn match_shapes(
     b: &TriMesh,
     params: &MatchParams,
 ) -> Result<MatchResult, MatchError> {
+    match_shapes_with_progress(a, b, params, &|_| {})
+}
+
+/// [`match_shapes`], calling `stage` with a short description as each
+/// stage starts (for progress displays).
+pub fn match_shapes_with_progress(
+    a: &TriMesh,
+    b: &TriMesh,
+    params: &MatchParams,
+    stage: &dyn Fn(&str),
+) -> Result<MatchResult, MatchError> {
     params.check()?;
+    stage("Laplacians and eigenbases of both shapes");
     let mut single = params.clone();
     single.spectrum.threads = 1;
     // The two shapes side by side, one thread each.
@@ -363,6 +375,10 @@ pub fn match_shapes(
     };
     let pa = pa.map_err(|e| name("source", e))?;
     let pb = pb.map_err(|e| name("target", e))?;
+    stage(match params.refine {
+        Refinement::None => "descriptors, functional map, point map",
+        _ => "descriptors, functional map, point map, refinement",
+    });
     let mut out = match_prepared(&pa, &pb, params)?;
     out.times.spectra = spectra;
     out.times.total += spectra;

@@ -270,6 +270,7 @@ pub(crate) fn run(cmd: RenderCommand) -> Result<(), Failure> {
                 gt_source,
                 gt,
             } = files.load()?;
+            let spinner = crate::Spinner::new(format!("{} geodesics", geodesic.name()));
             let solver = crate::distance_solver(&b, geodesic)?;
             let r = fmaps::eval::evaluate(
                 &b,
@@ -280,6 +281,7 @@ pub(crate) fn run(cmd: RenderCommand) -> Result<(), Failure> {
                 &fmaps::eval::EvalParams::default(),
             )
             .map_err(input)?;
+            drop(spinner);
             let (errors, title) = match &r.sym_errors {
                 Some(s) => (s, "symmetry-aware error"),
                 None => (&r.errors, "geodesic error"),
