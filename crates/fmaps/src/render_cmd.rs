@@ -174,6 +174,30 @@ The matrix file has one row per line, entries separated by spaces (as --save-fma
         #[arg(long)]
         json: bool,
     },
+    /// Cumulative error curves (fraction of points below each error) of
+    /// one or more `fmaps eval --json` reports, in one plot.
+    #[command(after_help = "Example:\n  \
+fmaps eval ... --map init.map --json > init.json\n  \
+fmaps eval ... --map zoomout.map --json > zoomout.json\n  \
+fmaps render curves init.json zoomout.json --out curves.png\n\n\
+Each curve is labelled with its file name (or --label, once per file) and its mean error x100.")]
+    Curves {
+        /// Reports written by `fmaps eval --json`.
+        #[arg(required = true)]
+        reports: Vec<PathBuf>,
+        /// Labels, one per report, in order.
+        #[arg(long)]
+        label: Vec<String>,
+        /// Plot title.
+        #[arg(long, default_value = "cumulative geodesic error")]
+        title: String,
+        /// Output PNG.
+        #[arg(long, default_value = "curves.png")]
+        out: PathBuf,
+        /// Print one JSON object.
+        #[arg(long)]
+        json: bool,
+    },
     /// A per-vertex scalar field (one number per line, e.g. the output of
     /// `fmaps geodesic --out`) with a colour bar.
     #[command(after_help = "Example:\n  \
@@ -384,6 +408,42 @@ pub(crate) fn run(cmd: RenderCommand) -> Result<(), Failure> {
             );
             json
         }
+        RenderCommand::Curves {
+            reports,
+            label,
+            title,
+            out,
+            json,
+        } => {
+            if !label.is_empty() && label.len() != reports.len() {
+                return Err(input(anyhow::anyhow!(
+                    "{} --label for {} reports: give one per report or none",
+                    label.len(),
+                    reports.len()
+                )));
+            }
+            let mut series = Vec::new();
+            let mut max_threshold = 0.0f64;
+            for (i, path) in reports.iter().enumerate() {
+                let (x, y, mean) = read_curve(path)?;
+                max_threshold = max_threshold.max(x.last().copied().unwrap_or(0.0));
+                let name = label.get(i).cloned().unwrap_or_else(|| {
+                    path.file_stem()
+                        .map_or(String::new(), |s| s.to_string_lossy().into_owned())
+                });
+                series.push(plot::Series {
+                    label: format!("{name} ({:.2})", 100.0 * mean),
+                    x,
+                    y,
+                });
+            }
+            save(
+                &plot::cumulative_curves(&title, max_threshold, &series),
+                &out,
+                &mut written,
+            )?;
+            json
+        }
         RenderCommand::Scalar {
             mesh,
             values,
@@ -497,6 +557,39 @@ fn read_matrix(path: &Path) -> Result<nalgebra::DMatrix<f64>, Failure> {
         c,
         rows.into_iter().flatten(),
     ))
+}
+
+/// Thresholds, curve and mean error of an `fmaps eval --json` report.
+fn read_curve(path: &Path) -> Result<(Vec<f64>, Vec<f64>, f64), Failure> {
+    let text = read_text(path)?;
+    let v: serde_json::Value = serde_json::from_str(&text).map_err(|e| {
+        input(anyhow::anyhow!(
+            "{}: not JSON ({e}); expected the output of `fmaps eval --json`",
+            path.display()
+        ))
+    })?;
+    let numbers = |key: &str| -> Result<Vec<f64>, Failure> {
+        v[key]
+            .as_array()
+            .and_then(|a| a.iter().map(serde_json::Value::as_f64).collect())
+            .ok_or_else(|| {
+                input(anyhow::anyhow!(
+                    "{}: no numeric `{key}` array; expected the output of `fmaps eval --json`",
+                    path.display()
+                ))
+            })
+    };
+    let (x, y) = (numbers("thresholds")?, numbers("curve")?);
+    if x.len() != y.len() || x.is_empty() {
+        return Err(input(anyhow::anyhow!(
+            "{}: {} thresholds but {} curve values",
+            path.display(),
+            x.len(),
+            y.len()
+        )));
+    }
+    let mean = v["mean_error"].as_f64().unwrap_or(f64::NAN);
+    Ok((x, y, mean))
 }
 
 /// One value per vertex.

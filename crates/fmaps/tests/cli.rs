@@ -492,6 +492,35 @@ fn render_subcommands_write_pictures_and_report_checked_numbers() {
     assert!((v["mean_error"].as_f64().unwrap() - 0.2).abs() < 1e-12);
     assert_eq!(v["geodesic"], "exact");
 
+    // Curves from `fmaps eval --json` reports.
+    for map in ["id", "shift"] {
+        let out = fmaps()
+            .args(["eval", "--source", &p("g.off"), "--target", &p("g.off")])
+            .args([
+                "--map",
+                &p(&format!("{map}.map")),
+                "--gt-source",
+                &p("g.vts"),
+            ])
+            .args(["--gt-target", &p("g.vts"), "--json"])
+            .output()
+            .unwrap();
+        std::fs::write(dir.join(format!("{map}.json")), out.stdout).unwrap();
+    }
+    json(&[
+        "curves",
+        &p("id.json"),
+        &p("shift.json"),
+        "--out",
+        &p("curves.png"),
+    ]);
+    assert!(
+        failure(&["curves", &p("g.off")]).contains("expected the output of `fmaps eval --json`")
+    );
+    assert!(
+        failure(&["curves", &p("id.json"), "--label", "a", "--label", "b"]).contains("2 --label")
+    );
+
     // Matrix heat map: 5 of the 9 entries are below 0.1 in magnitude.
     std::fs::write(dir.join("C.txt"), "1 0 0.05\n0 -1 0.2\n0 0 1\n").unwrap();
     let v = json(&["fmap", &p("C.txt"), "--out", &p("C.png")]);
