@@ -14,7 +14,7 @@ use fmaps::mesh_io::TriMesh;
 use indicatif::{ProgressBar, ProgressStyle};
 use serde_json::json;
 
-use crate::util::{data_dir, root};
+use crate::util::{bcicp_dir, collections_or_default, root};
 
 /// Options of `cargo xtask eval`.
 #[derive(clap::Args)]
@@ -221,18 +221,8 @@ fn pyfm_seconds(
 }
 
 pub fn eval(args: &Args) -> anyhow::Result<()> {
-    let bcicp = data_dir(args.data.as_deref()).join("bcicp");
-    if !bcicp.is_dir() {
-        bail!(
-            "{} not found: pass --data or set FMAPS_DATA",
-            bcicp.display()
-        );
-    }
-    let collections = if args.collections.is_empty() {
-        vec!["FAUST".to_string(), "TOSCA_Isometric".to_string()]
-    } else {
-        args.collections.clone()
-    };
+    let bcicp = bcicp_dir(args.data.as_deref())?;
+    let collections = collections_or_default(&args.collections);
     let out_dir = root().join("target/eval");
     std::fs::create_dir_all(&out_dir)?;
     let params = EvalParams::default();

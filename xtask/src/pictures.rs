@@ -6,7 +6,7 @@
 
 use std::path::PathBuf;
 
-use anyhow::{Context, bail};
+use anyhow::Context;
 use fmaps::eval::{Collection, EvalParams, MapReport, evaluate};
 use fmaps::geodesic::ExactSolver;
 use fmaps::mesh_io::TriMesh;
@@ -14,7 +14,7 @@ use fmaps::pipeline::{MatchParams, Refinement, match_prepared, prepare};
 use fmaps_viz::{self as viz, Axis, BLACK, Image, View, WHITE, plot};
 use serde_json::json;
 
-use crate::util::{data_dir, root};
+use crate::util::{bcicp_dir, collections_or_default, root};
 
 /// Options of `cargo xtask pictures`.
 #[derive(clap::Args)]
@@ -83,18 +83,8 @@ fn transfer_row(
 }
 
 pub fn pictures(args: &Args) -> anyhow::Result<()> {
-    let bcicp = data_dir(args.data.as_deref()).join("bcicp");
-    if !bcicp.is_dir() {
-        bail!(
-            "{} not found: pass --data or set FMAPS_DATA",
-            bcicp.display()
-        );
-    }
-    let collections = if args.collections.is_empty() {
-        vec!["FAUST".to_string(), "TOSCA_Isometric".to_string()]
-    } else {
-        args.collections.clone()
-    };
+    let bcicp = bcicp_dir(args.data.as_deref())?;
+    let collections = collections_or_default(&args.collections);
     let out_root = args
         .out
         .clone()

@@ -57,6 +57,27 @@ pub fn data_dir(arg: Option<&Path>) -> PathBuf {
         .unwrap_or_else(|| root().join("../shared/datasets"))
 }
 
+/// The `bcicp` benchmark folder of the dataset directory, checked.
+pub fn bcicp_dir(arg: Option<&Path>) -> anyhow::Result<PathBuf> {
+    let bcicp = data_dir(arg).join("bcicp");
+    if !bcicp.is_dir() {
+        bail!(
+            "{} not found: pass --data or set FMAPS_DATA",
+            bcicp.display()
+        );
+    }
+    Ok(bcicp)
+}
+
+/// The collections asked for, FAUST and TOSCA_Isometric when none.
+pub fn collections_or_default(asked: &[String]) -> Vec<String> {
+    if asked.is_empty() {
+        vec!["FAUST".to_string(), "TOSCA_Isometric".to_string()]
+    } else {
+        asked.to_vec()
+    }
+}
+
 /// The peers directory (`../shared/peers`).
 pub fn peers_dir() -> PathBuf {
     root().join("../shared/peers")

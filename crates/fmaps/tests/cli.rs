@@ -7,6 +7,18 @@ fn fmaps() -> Command {
     Command::new(env!("CARGO_BIN_EXE_fmaps"))
 }
 
+/// Runs `cmd`, asserts success (showing stderr otherwise) and parses its
+/// stdout as one JSON object.
+fn json_of(cmd: &mut Command) -> serde_json::Value {
+    let out = cmd.output().unwrap();
+    assert!(
+        out.status.success(),
+        "{cmd:?}: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    serde_json::from_slice(&out.stdout).unwrap()
+}
+
 fn tmpdir(name: &str) -> PathBuf {
     let d = std::env::temp_dir().join(format!("fmaps-cli-{name}-{}", std::process::id()));
     std::fs::create_dir_all(&d).unwrap();
@@ -15,16 +27,7 @@ fn tmpdir(name: &str) -> PathBuf {
 
 #[test]
 fn spectrum_of_the_builtin_sphere() {
-    let out = fmaps()
-        .args(["spectrum", "--builtin", "sphere", "--k", "9", "--json"])
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let v = json_of(fmaps().args(["spectrum", "--builtin", "sphere", "--k", "9", "--json"]));
     let ev: Vec<f64> = serde_json::from_value(v["eigenvalues"].clone()).unwrap();
     assert_eq!(ev.len(), 9);
     assert!(ev[0].abs() < 1e-9);
@@ -263,18 +266,12 @@ fn match_writes_a_one_based_map_and_reports_stages() {
     let map = dir.join("t_t.map");
     let fmap = dir.join("C.txt");
     let s = |p: &PathBuf| p.to_str().unwrap().to_string();
-    let out = fmaps()
-        .args(["match", &s(&mesh), &s(&mesh), "--out", &s(&map)])
-        .args(["--k", "12", "--k-process", "30", "--n-descr", "30"])
-        .args(["--save-fmap", &s(&fmap), "--json"])
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+    let v = json_of(
+        fmaps()
+            .args(["match", &s(&mesh), &s(&mesh), "--out", &s(&map)])
+            .args(["--k", "12", "--k-process", "30", "--n-descr", "30"])
+            .args(["--save-fmap", &s(&fmap), "--json"]),
     );
-    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     for stage in [
         "spectra",
         "descriptors",
@@ -305,18 +302,12 @@ fn match_writes_a_one_based_map_and_reports_stages() {
     assert!(err.contains("lm.txt:2"), "{err}");
     // Refinement: ZoomOut to 20 reports its iterations; a malformed
     // schedule is bad usage.
-    let out = fmaps()
-        .args(["match", &s(&mesh), &s(&mesh), "--json"])
-        .args(["--k", "12", "--k-process", "20", "--n-descr", "30"])
-        .args(["--zoomout", "8:20:4"])
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+    let v = json_of(
+        fmaps()
+            .args(["match", &s(&mesh), &s(&mesh), "--json"])
+            .args(["--k", "12", "--k-process", "20", "--n-descr", "30"])
+            .args(["--zoomout", "8:20:4"]),
     );
-    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     assert_eq!(v["refine"]["method"], "zoomout 8:20:4");
     assert_eq!(v["refine"]["iterations"], 3);
     assert_eq!(v["refine"]["final_k"], 20);
@@ -357,17 +348,11 @@ fn match_writes_a_one_based_map_and_reports_stages() {
 #[test]
 fn demo_matches_the_builtin_pair_and_writes_pictures() {
     let dir = tmpdir("demo");
-    let out = fmaps()
-        .args(["demo", "--subdivisions", "3", "--json", "--out"])
-        .arg(&dir)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+    let v = json_of(
+        fmaps()
+            .args(["demo", "--subdivisions", "3", "--json", "--out"])
+            .arg(&dir),
     );
-    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     assert_eq!(v["n_vertices"], 642);
     assert_eq!(v["geodesic"], "exact");
     // ZoomOut improves the initial map of this near-isometric pair, and
@@ -412,18 +397,7 @@ fn render_subcommands_write_pictures_and_report_checked_numbers() {
     let shifted: Vec<usize> = (0..n).map(|v| if v % 5 < 4 { v + 1 } else { v }).collect();
     fmaps::mesh_io::write_map(dir.join("shift.map"), &shifted).unwrap();
     let json = |args: &[&str]| -> serde_json::Value {
-        let out = fmaps()
-            .arg("render")
-            .args(args)
-            .arg("--json")
-            .output()
-            .unwrap();
-        assert!(
-            out.status.success(),
-            "{args:?}: {}",
-            String::from_utf8_lossy(&out.stderr)
-        );
-        let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+        let v = json_of(fmaps().arg("render").args(args).arg("--json"));
         for f in v["written"].as_array().unwrap() {
             let bytes = std::fs::read(f.as_str().unwrap()).unwrap();
             assert!(
