@@ -128,14 +128,7 @@ pub fn pictures(args: &Args) -> anyhow::Result<()> {
             &transfer_row(&ma, &mb, &colors, &maps, &view)?,
             "color-transfer.png",
         )?;
-        let uv: Vec<[f64; 2]> = ma
-            .vertices()
-            .iter()
-            .map(|&p| {
-                let q = view.camera(p);
-                [q[0], q[1]]
-            })
-            .collect();
+        let uv = fmaps::pictures::camera_uv(&ma, &view);
         save(
             &transfer_row(&ma, &mb, &viz::checkerboard(&uv, 10), &maps, &view)?,
             "texture-transfer.png",

@@ -34,15 +34,20 @@ pub fn texture_transfer(
     squares: usize,
     view: &View,
 ) -> fmaps_viz::Result<Transfer> {
-    let uv: Vec<[f64; 2]> = source
-        .vertices()
+    let uv = camera_uv(source, view);
+    transfer(source, target, t_ab, checkerboard(&uv, squares), view)
+}
+
+/// The picture-plane coordinates of the vertices in `view` (x right, y
+/// up): a planar parameterisation for [`checkerboard`] textures.
+pub fn camera_uv(mesh: &TriMesh, view: &View) -> Vec<[f64; 2]> {
+    mesh.vertices()
         .iter()
         .map(|&p| {
             let c = view.camera(p);
             [c[0], c[1]]
         })
-        .collect();
-    transfer(source, target, t_ab, checkerboard(&uv, squares), view)
+        .collect()
 }
 
 fn transfer(

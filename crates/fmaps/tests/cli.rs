@@ -19,6 +19,21 @@ fn json_of(cmd: &mut Command) -> serde_json::Value {
     serde_json::from_slice(&out.stdout).unwrap()
 }
 
+/// A unit square grid (25 vertices, area 1) in `dir`: g.off, the
+/// identity as ground truth g.vts and map id.map, and shift.map, one step
+/// (0.25) to the right except on the last column (mean error 0.25 * 20/25).
+fn grid_fixture(dir: &std::path::Path) -> (fmaps::mesh_io::TriMesh, Vec<usize>) {
+    let m = fmaps::mesh_io::generate::grid(1.0, 1.0, 4, 4);
+    fmaps::mesh_io::write_mesh(dir.join("g.off"), &m).unwrap();
+    let n = m.n_vertices();
+    let all: Vec<usize> = (0..n).collect();
+    fmaps::mesh_io::write_vts(dir.join("g.vts"), &all).unwrap();
+    fmaps::mesh_io::write_map(dir.join("id.map"), &all).unwrap();
+    let shifted: Vec<usize> = (0..n).map(|v| if v % 5 < 4 { v + 1 } else { v }).collect();
+    fmaps::mesh_io::write_map(dir.join("shift.map"), &shifted).unwrap();
+    (m, all)
+}
+
 fn tmpdir(name: &str) -> PathBuf {
     let d = std::env::temp_dir().join(format!("fmaps-cli-{name}-{}", std::process::id()));
     std::fs::create_dir_all(&d).unwrap();
@@ -189,16 +204,7 @@ fn geodesic_distances_on_a_flat_grid() {
 #[test]
 fn eval_of_an_identity_and_a_shifted_map() {
     let dir = tmpdir("eval");
-    let mesh = dir.join("g.off");
-    let m = fmaps::mesh_io::generate::grid(1.0, 1.0, 4, 4); // 25 vertices, area 1
-    fmaps::mesh_io::write_mesh(&mesh, &m).unwrap();
-    let n = m.n_vertices();
-    let all: Vec<usize> = (0..n).collect();
-    fmaps::mesh_io::write_vts(dir.join("g.vts"), &all).unwrap();
-    fmaps::mesh_io::write_map(dir.join("id.map"), &all).unwrap();
-    // One step to the right (0.25), the last column stays: mean 0.25 * 20/25.
-    let shifted: Vec<usize> = (0..n).map(|v| if v % 5 < 4 { v + 1 } else { v }).collect();
-    fmaps::mesh_io::write_map(dir.join("shift.map"), &shifted).unwrap();
+    let (_, all) = grid_fixture(&dir);
     let run = |map: &str| -> serde_json::Value {
         let p = |f: &str| dir.join(f).to_str().unwrap().to_string();
         let out = fmaps()
@@ -388,14 +394,8 @@ fn demo_matches_the_builtin_pair_and_writes_pictures() {
 fn render_subcommands_write_pictures_and_report_checked_numbers() {
     let dir = tmpdir("render");
     let p = |f: &str| dir.join(f).to_str().unwrap().to_string();
-    let m = fmaps::mesh_io::generate::grid(1.0, 1.0, 4, 4); // 25 vertices, area 1
-    fmaps::mesh_io::write_mesh(dir.join("g.off"), &m).unwrap();
+    let (m, _) = grid_fixture(&dir);
     let n = m.n_vertices();
-    let all: Vec<usize> = (0..n).collect();
-    fmaps::mesh_io::write_vts(dir.join("g.vts"), &all).unwrap();
-    fmaps::mesh_io::write_map(dir.join("id.map"), &all).unwrap();
-    let shifted: Vec<usize> = (0..n).map(|v| if v % 5 < 4 { v + 1 } else { v }).collect();
-    fmaps::mesh_io::write_map(dir.join("shift.map"), &shifted).unwrap();
     let json = |args: &[&str]| -> serde_json::Value {
         let v = json_of(fmaps().arg("render").args(args).arg("--json"));
         for f in v["written"].as_array().unwrap() {
