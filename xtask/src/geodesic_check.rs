@@ -48,7 +48,9 @@ pub fn geodesic_check(args: &Args) -> anyhow::Result<()> {
         "ratio",
         "heat dev"
     );
+    let fmaps_bin = crate::util::fmaps_binary()?;
     let mut worst = 0.0f64;
+    let mut memory = Vec::new();
     for mesh_path in meshes.iter().filter(|p| p.exists()) {
         let mesh = fmaps::mesh_io::read_mesh(mesh_path)?;
         let n = mesh.n_vertices();
@@ -64,7 +66,24 @@ pub fn geodesic_check(args: &Args) -> anyhow::Result<()> {
             .args(["--method", "exact", "--out"])
             .arg(&tmp))?;
         let peer: Value = serde_json::from_str(&r.stdout)?;
+        let peer_mb = r.peak_mb;
         let reference = read_npy_f64_2d(&tmp)?;
+        // Peak memory of a whole process computing one exact field, ours
+        // (the CLI) and the peer's (Python with tvb-gdist) above.
+        let ours_mb = run(Command::new(&fmaps_bin)
+            .arg("geodesic")
+            .arg(mesh_path)
+            .args(["--source", &src_args[0], "--json", "--threads", "1"]))?
+        .peak_mb;
+        memory.push((
+            mesh_path
+                .file_stem()
+                .unwrap()
+                .to_string_lossy()
+                .into_owned(),
+            ours_mb,
+            peer_mb,
+        ));
         let t = Instant::now();
         let solver = ExactSolver::new(&mesh)?;
         let ours: Vec<Vec<f64>> = sources
@@ -135,6 +154,12 @@ pub fn geodesic_check(args: &Args) -> anyhow::Result<()> {
         );
     }
     let _ = std::fs::remove_file(&tmp);
+    println!(
+        "peak memory of a whole process computing exact fields (fmaps geodesic CLI, one source; geodesics.py with tvb-gdist, all sources):"
+    );
+    for (name, ours, peer) in &memory {
+        println!("  {name:<16} fmaps {ours:>7.1} MiB   tvb-gdist process {peer:>7.1} MiB");
+    }
     println!(
         "largest relative difference: {worst:.2e} (required: 1e-6); exact: fmaps per source without its 4 ms mesh setup, tvb-gdist per call (it has no reusable solver); heat: both include their setup; heat dev = mean relative deviation from exact beyond 20% of the largest distance"
     );

@@ -78,6 +78,28 @@ pub fn collections_or_default(asked: &[String]) -> Vec<String> {
     }
 }
 
+/// The release `fmaps` binary next to this xtask binary, built first (a
+/// no-op when up to date).
+pub fn fmaps_binary() -> anyhow::Result<PathBuf> {
+    let status = Command::new(env!("CARGO"))
+        .args(["build", "--release", "-q", "-p", "fmaps", "--bin", "fmaps"])
+        .current_dir(root())
+        .status()
+        .context("building the fmaps binary")?;
+    if !status.success() {
+        bail!("cargo build -p fmaps failed");
+    }
+    let exe = std::env::current_exe()?;
+    let bin = exe
+        .parent()
+        .context("xtask binary without a folder")?
+        .join("fmaps");
+    if !bin.is_file() {
+        bail!("{} not found after building", bin.display());
+    }
+    Ok(bin)
+}
+
 /// The peers directory (`../shared/peers`).
 pub fn peers_dir() -> PathBuf {
     root().join("../shared/peers")
