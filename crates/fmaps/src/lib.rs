@@ -167,3 +167,8 @@ pub fn spectrum(
         times,
     })
 }
+
+/// The README's example, compiled and run as a doctest.
+#[cfg(doctest)]
+#[doc = include_str!("../README.md")]
+struct ReadmeDoctests;
