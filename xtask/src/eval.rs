@@ -68,12 +68,13 @@ struct PipelineCache {
 
 impl MapSource {
     fn open(c: &Collection, method: &str, peer_dir: &std::path::Path) -> anyhow::Result<MapSource> {
-        if let Some((refine, starts)) = pipeline_method(method)? {
+        if let Some((refine, starts, restart_below)) = pipeline_method(method)? {
             return Ok(MapSource::Pipeline(Box::new(PipelineCache {
                 params: fmaps::MatchParams {
                     k_process: 200.max(refine.k_needed()),
                     refine,
                     starts,
+                    restart_below,
                     ..fmaps::MatchParams::default()
                 },
                 shapes: HashMap::new(),
@@ -141,21 +142,31 @@ impl MapSource {
 /// `fmaps-init` (none), `fmaps-icp` (10 iterations), `fmaps-zoomout`
 /// (50 -> 150 step 5, pyFM's schedule in `pyfm_pipeline.py`) or
 /// `fmaps-zoomout:START:FINAL:STEP`; any of them with `@K1,K2,..` appended
-/// adds starts at those initial sizes ([`fmaps::MatchParams::starts`]).
-fn pipeline_method(
-    method: &str,
-) -> anyhow::Result<Option<(fmaps::pipeline::Refinement, Vec<usize>)>> {
+/// adds starts at those initial sizes ([`fmaps::MatchParams::starts`]),
+/// and `@K1,K2<SCORE` tries them only when the first map's orientation
+/// score is below SCORE ([`fmaps::MatchParams::restart_below`]).
+fn pipeline_method(method: &str) -> anyhow::Result<Option<PipelineMethod>> {
     use fmaps::pipeline::Refinement;
-    let (method, starts) = match method.split_once('@') {
-        Some((m, list)) if m.starts_with("fmaps-") => {
+    let (method, starts, restart_below) = match method.split_once('@') {
+        Some((m, spec)) if m.starts_with("fmaps-") => {
+            let (list, below) =
+                match spec.split_once('<') {
+                    Some((l, t)) => (
+                        l,
+                        Some(t.parse::<f64>().with_context(|| {
+                            format!("method {m}@{spec}: expected @K1,K2,..<SCORE")
+                        })?),
+                    ),
+                    None => (spec, None),
+                };
             let starts = list
                 .split(',')
                 .map(str::parse)
                 .collect::<Result<Vec<usize>, _>>()
-                .with_context(|| format!("method {m}@{list}: expected @K1,K2,.."))?;
-            (m, starts)
+                .with_context(|| format!("method {m}@{spec}: expected @K1,K2,.."))?;
+            (m, starts, below)
         }
-        _ => (method, Vec::new()),
+        _ => (method, Vec::new(), None),
     };
     Ok(Some((
         match method {
@@ -180,8 +191,12 @@ fn pipeline_method(
             },
         },
         starts,
+        restart_below,
     )))
 }
+
+/// The refinement, the extra starts and the restart bar of a pipeline method.
+type PipelineMethod = (fmaps::pipeline::Refinement, Vec<usize>, Option<f64>);
 
 /// Per-pair seconds of one pyFM stage's map, counted like ours: loading,
 /// Laplacians and eigenbases (0 for shapes cached from earlier pairs),

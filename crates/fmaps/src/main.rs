@@ -207,6 +207,10 @@ struct MatchArgs {
     /// `20,30`) and keep the final map whose orientation is best preserved.
     #[arg(long, value_delimiter = ',', value_name = "K1,K2,..")]
     starts: Vec<usize>,
+    /// With --starts: try the further starts only when the first map's
+    /// orientation score is below this (well-oriented pairs cost one run).
+    #[arg(long, requires = "starts", value_name = "SCORE")]
+    restart_below: Option<f64>,
     /// Write C_BA (k x k, functions on B to functions on A) as text.
     #[arg(long)]
     save_fmap: Option<PathBuf>,
@@ -950,6 +954,7 @@ fn match_cmd(args: &MatchArgs) -> Result<(), Failure> {
     }
     params.adjoint = args.adjoint;
     params.starts = args.starts.clone();
+    params.restart_below = args.restart_below;
     params.refine = refinement(args)?;
     params.k_process = params.k_process.max(params.refine.k_needed());
     let spinner = Spinner::new("matching");

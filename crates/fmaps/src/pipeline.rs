@@ -180,6 +180,11 @@ pub struct MatchParams {
     /// the refined map tells which start converged to the right branch,
     /// without any ground truth. Empty: a single start at `k`.
     pub starts: Vec<usize>,
+    /// With [`starts`](Self::starts): try the further starts only when the
+    /// first start's (size `k`) orientation score is below this value
+    /// (above its negative with `orient_reversing`), so well-oriented
+    /// pairs cost one start. `None`: always run every start.
+    pub restart_below: Option<f64>,
 }
 
 impl Default for MatchParams {
@@ -203,6 +208,7 @@ impl Default for MatchParams {
             compress: true,
             refine: Refinement::None,
             starts: Vec::new(),
+            restart_below: None,
         }
     }
 }
@@ -613,6 +619,13 @@ fn multi_start(
             .is_none_or(|(_, b)| sign * r.orientation > sign * b.orientation)
         {
             best = Some((starts.len() - 1, r));
+        }
+        if starts.len() == 1
+            && params
+                .restart_below
+                .is_some_and(|t| sign * starts[0].orientation >= t)
+        {
+            break;
         }
     }
     let (chosen, mut out) = best.expect("at least one start");

@@ -186,6 +186,23 @@ fn multi_start_keeps_the_best_oriented_start_and_equals_that_single_run() {
         let s = match_shapes(&a, &b, &single).unwrap();
         assert_eq!(s.t_ab, r.t_ab);
         assert_eq!(s.orientation, r.orientation);
+        // restart_below: a bar the first start clears keeps it alone; one
+        // no start can clear (scores are at most 1) runs every start.
+        let first = r.starts[0].orientation;
+        let lazy = MatchParams {
+            restart_below: Some(sign * first - 1e-9),
+            ..multi.clone()
+        };
+        let lazy = match_shapes(&a, &b, &lazy).unwrap();
+        assert_eq!(lazy.starts.len(), 1);
+        assert_eq!(lazy.orientation, first);
+        let eager = MatchParams {
+            restart_below: Some(1.5),
+            ..multi.clone()
+        };
+        let eager = match_shapes(&a, &b, &eager).unwrap();
+        assert_eq!(eager.starts.len(), 3);
+        assert_eq!(eager.t_ab, r.t_ab);
         if !reversing {
             // Mean distance (on A) between the image and the truth, for a
             // shape about 2.6 across.
