@@ -324,7 +324,7 @@ fn krylov_schur(
         // block; m − keep must be a positive multiple of b.
         let target = k + (m - k) / 2;
         let keep = m - ((m - target) / b).max(1) * b;
-        debug_assert!(keep >= k && (m - keep) % b == 0);
+        debug_assert!(keep >= k && (m - keep).is_multiple_of(b));
         let y = gather_columns(u, &order[..keep]);
         restart_in_place(&mut v, n, m, y.as_ref(), par);
         v.copy_within(m * n..(m + b) * n, keep * n);

@@ -113,14 +113,14 @@ impl GroundTruth {
                 expected: source.len(),
             });
         }
-        if let Some(s) = &target_sym {
-            if s.len() != source.len() {
-                return Err(Error::SizeMismatch {
-                    what: "symmetric ground truth list".into(),
-                    found: s.len(),
-                    expected: source.len(),
-                });
-            }
+        if let Some(s) = &target_sym
+            && s.len() != source.len()
+        {
+            return Err(Error::SizeMismatch {
+                what: "symmetric ground truth list".into(),
+                found: s.len(),
+                expected: source.len(),
+            });
         }
         Ok(Self {
             source,

@@ -160,14 +160,14 @@ impl FmapEnergy {
                 });
             }
         }
-        if let Some(c0) = &self.fixed_first_column {
-            if c0.len() != kb {
-                return Err(Error::SizeMismatch {
-                    what: "fixed first column length (k_B)",
-                    found: c0.len(),
-                    expected: kb,
-                });
-            }
+        if let Some(c0) = &self.fixed_first_column
+            && c0.len() != kb
+        {
+            return Err(Error::SizeMismatch {
+                what: "fixed first column length (k_B)",
+                found: c0.len(),
+                expected: kb,
+            });
         }
         Ok((ka, kb))
     }

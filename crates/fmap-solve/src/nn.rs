@@ -7,6 +7,15 @@
 //! smallest index). Memory is bounded by the block size, never
 //! n_queries x n_data.
 //!
+//! In high dimensions most of that work can be skipped ([`NnStrategy::Prefix`]):
+//! spectral embeddings spread mostly along their leading (low-frequency)
+//! coordinates, so the distance over a 32-coordinate prefix, which bounds
+//! the full distance from below, already exceeds the nearest distance for
+//! all but a few percent of the rows. Guesses (the previous iteration's
+//! map in ZoomOut and ICP, [`nearest_rows_hinted`]) give the upper bound
+//! that makes this cut sharp. The scans and distance kernels are compiled
+//! for AVX-512 and AVX2 as well and the widest one the CPU has is run.
+//!
 //! The band: with u = 2⁻²⁴, rounding the inputs to f32 and a length-d dot
 //! product in f32 change `q·x` by at most `(d + 2) u |q| |x|`, so each score
 //! `|x|² − 2 q·x` is off by at most `e = (d + 2) u (|q|² + |x|²)`; the
@@ -20,6 +29,38 @@ use rayon::prelude::*;
 
 /// Queries per block.
 const BLOCK: usize = 256;
+
+/// A function compiled three times, for AVX-512, for AVX2 and for baseline
+/// x86-64, and the widest one the CPU has run (see [`simd`]).
+macro_rules! dispatched {
+    ($(#[$m:meta])* fn $name:ident($($arg:ident: $ty:ty),* $(,)?) -> $ret:ty $body:block) => {
+        $(#[$m])*
+        fn $name($($arg: $ty),*) -> $ret {
+            #[inline(always)]
+            fn body($($arg: $ty),*) -> $ret $body
+            #[cfg(target_arch = "x86_64")]
+            {
+                #[target_feature(enable = "avx512f,avx512bw,avx512vl,avx2,fma,bmi1,bmi2,popcnt,lzcnt")]
+                fn v4($($arg: $ty),*) -> $ret {
+                    body($($arg),*)
+                }
+                #[target_feature(enable = "avx2,fma,bmi1,bmi2,popcnt,lzcnt")]
+                fn v3($($arg: $ty),*) -> $ret {
+                    body($($arg),*)
+                }
+                if simd::has_v4() {
+                    // SAFETY: the CPU has the features (runtime check).
+                    return unsafe { v4($($arg),*) };
+                }
+                if simd::has_v3() {
+                    // SAFETY: as above.
+                    return unsafe { v3($($arg),*) };
+                }
+            }
+            body($($arg),*)
+        }
+    };
+}
 
 /// How [`nearest_rows_with`] searches; every strategy returns the same,
 /// exact answer.
@@ -35,7 +76,18 @@ pub enum NnStrategy {
     /// a cluster of queries is compared (f32 GEMM) only with the data
     /// clusters that the triangle inequality cannot rule out.
     Tree,
+    /// Every pair is ranked on the leading [`PREFIX_DIM`] coordinates only
+    /// (f32 GEMM of that width); a query's full f64 distance is computed
+    /// only for the rows whose partial distance does not already exceed an
+    /// upper bound of its nearest distance (the best-ranked row's, or the
+    /// hint's when given). Spectral embeddings concentrate their spread in
+    /// the leading (low-frequency) coordinates, so a few percent of the
+    /// rows survive.
+    Prefix,
 }
+
+/// Leading coordinates on which [`NnStrategy::Prefix`] ranks every pair.
+pub const PREFIX_DIM: usize = 32;
 
 /// For every row of `queries` (n_q x d), the index of the nearest row of
 /// `data` (n_x x d); [`NnStrategy::Auto`]. Panics if the dimensions differ
@@ -54,6 +106,35 @@ pub fn nearest_rows_with(
     queries: &DMatrix<f64>,
     strategy: NnStrategy,
 ) -> Vec<usize> {
+    search(data, queries, strategy, None)
+}
+
+/// [`nearest_rows`] with a guess per query (any data row index, e.g. the
+/// previous iteration's answer in ZoomOut or ICP). A good guess lets the
+/// search discard more rows early; the answer is the same exact nearest
+/// row whatever the guesses are (an index out of range counts as no
+/// guess). Panics if the dimensions differ or `hint` is not one per query.
+#[track_caller]
+pub fn nearest_rows_hinted(
+    data: &DMatrix<f64>,
+    queries: &DMatrix<f64>,
+    hint: &[usize],
+) -> Vec<usize> {
+    assert_eq!(
+        hint.len(),
+        queries.nrows(),
+        "nearest_rows_hinted: one hint per query"
+    );
+    search(data, queries, NnStrategy::Auto, Some(hint))
+}
+
+#[track_caller]
+fn search(
+    data: &DMatrix<f64>,
+    queries: &DMatrix<f64>,
+    strategy: NnStrategy,
+    hint: Option<&[usize]>,
+) -> Vec<usize> {
     assert_eq!(
         data.ncols(),
         queries.ncols(),
@@ -63,20 +144,36 @@ pub fn nearest_rows_with(
     if nx == 0 {
         return vec![0; queries.nrows()];
     }
-    let tree = match strategy {
-        // Measured on FAUST spectral embeddings (`cargo xtask bench-refine`):
-        // the tree is 3x faster at d = 10, even at d = 50, and slower above
-        // (cluster radii grow with the frequencies in the embedding).
+    let strategy = match strategy {
+        // Measured on FAUST spectral embeddings, one thread
+        // (`cargo xtask bench-refine`): the tree is 3x faster than brute
+        // force at d = 10 and still ahead at d = 30, slower from d ≈ 50
+        // (cluster radii grow with the frequencies in the embedding). The
+        // prefix search wins from d ≈ 40: without a guess up to d ≈ 100
+        // (at d = 50 it takes 0.037 s against 0.043 brute, 0.050 tree;
+        // 0.065 against 0.063 brute at d = 100), with the previous
+        // iteration's map as guesses at every larger d (d = 100 / 150 /
+        // 200: 0.044 / 0.061 / 0.079 s against 0.063 / 0.086 / 0.110).
         NnStrategy::Auto => {
-            (1..=TREE_MAX_DIM).contains(&d)
+            let prefix =
+                nx >= 1024 && d > PREFIX_NO_GUESS.0 && (hint.is_some() || d <= PREFIX_NO_GUESS.1);
+            if prefix {
+                NnStrategy::Prefix
+            } else if (1..=TREE_MAX_DIM).contains(&d)
                 && nx >= 4 * LEAF_DATA
                 && queries.nrows() >= 2 * LEAF_QUERY
+            {
+                NnStrategy::Tree
+            } else {
+                NnStrategy::Brute
+            }
         }
-        NnStrategy::Brute => false,
-        NnStrategy::Tree => d > 0,
+        s => s,
     };
-    if tree {
-        return tree_search(data, queries);
+    match strategy {
+        NnStrategy::Tree if d > 0 => return tree_search(data, queries),
+        NnStrategy::Prefix if d > PREFIX_DIM => return prefix_search(data, queries, hint),
+        _ => {}
     }
     // Row-major copies: each row contiguous, for the direct re-checks.
     let x_rows: Vec<f64> = data.transpose().as_slice().to_vec();
@@ -91,50 +188,61 @@ pub fn nearest_rows_with(
     let nq = queries.nrows();
     let u = f64::from(f32::EPSILON) / 2.0;
     let starts: Vec<usize> = (0..nq).step_by(BLOCK).collect();
-    starts
+    let blocks: Vec<Vec<usize>> = starts
         .par_iter()
-        .flat_map_iter(|&q0| {
-            let rows = BLOCK.min(nq - q0);
-            let q = Mat::<f32>::from_fn(rows, d, |i, j| queries[(q0 + i, j)] as f32);
-            // Sᵀ = X Qᵀ (nx x rows): column i holds query i's cross terms,
-            // contiguous for the scans below.
-            let mut s = Mat::<f32>::zeros(nx, rows);
-            matmul(
-                s.as_mut(),
-                Accum::Replace,
-                x_mat,
-                q.transpose(),
-                1.0f32,
-                Par::Seq,
-            );
-            let (x_rows, x_norm, q_rows) = (&x_rows, &x_norm, &q_rows);
-            (0..rows)
-                .map(move |i| {
+        .map_init(
+            || Mat::<f32>::zeros(nx, BLOCK),
+            |buf, &q0| {
+                let rows = BLOCK.min(nq - q0);
+                let q = Mat::<f32>::from_fn(rows, d, |i, j| queries[(q0 + i, j)] as f32);
+                // Sᵀ = X Qᵀ (nx x rows): column i holds query i's cross
+                // terms, contiguous for the scans.
+                matmul(
+                    buf.as_mut().subcols_mut(0, rows),
+                    Accum::Replace,
+                    x_mat,
+                    q.transpose(),
+                    1.0f32,
+                    Par::Seq,
+                );
+                let mut out = Vec::with_capacity(rows);
+                for i in 0..rows {
                     let qi = &q_rows[(q0 + i) * d..(q0 + i + 1) * d];
                     let q_norm: f64 = qi.iter().map(|v| v * v).sum();
-                    let col = s.col_as_slice(i);
-                    let mut best = f64::INFINITY;
-                    for k in 0..nx {
-                        best = best.min(x_norm[k] - 2.0 * f64::from(col[k]));
-                    }
                     let band = 4.0 * (d as f64 + 2.0) * u * (q_norm + x_norm_max) + 1e-300;
-                    let mut arg = usize::MAX;
-                    let mut best_d = f64::INFINITY;
-                    for k in 0..nx {
-                        if x_norm[k] - 2.0 * f64::from(col[k]) <= best + band {
-                            let xk = &x_rows[k * d..(k + 1) * d];
-                            let dist: f64 = xk.iter().zip(qi).map(|(a, b)| (a - b) * (a - b)).sum();
-                            if dist < best_d {
-                                best_d = dist;
-                                arg = k;
-                            }
-                        }
-                    }
-                    arg
-                })
-                .collect::<Vec<_>>()
-        })
-        .collect()
+                    let col = &buf.col_as_slice(i)[..nx];
+                    out.push(brute_query(&x_rows, &x_norm, col, qi, band));
+                }
+                out
+            },
+        )
+        .collect();
+    blocks.into_iter().flatten().collect()
+}
+
+dispatched! {
+    /// The nearest row to `qi` given its cross terms `col` (f32) with every
+    /// row: every row whose score `|x|² − 2 q·x` is within `band` of the
+    /// smallest is re-checked with a direct f64 distance.
+    fn brute_query(x_rows: &[f64], x_norm: &[f64], col: &[f32], qi: &[f64], band: f64) -> usize {
+        let d = qi.len();
+        let mut best = f64::INFINITY;
+        for (xn, c) in x_norm.iter().zip(col) {
+            best = best.min(xn - 2.0 * f64::from(*c));
+        }
+        let mut arg = usize::MAX;
+        let mut best_d = f64::INFINITY;
+        for (k, (xn, c)) in x_norm.iter().zip(col).enumerate() {
+            if xn - 2.0 * f64::from(*c) <= best + band
+                && let Some(dist) = dist2_below(&x_rows[k * d..(k + 1) * d], qi, best_d)
+                && dist < best_d
+            {
+                best_d = dist;
+                arg = k;
+            }
+        }
+        arg
+    }
 }
 
 /// Largest dimension [`NnStrategy::Auto`] uses the tree for.
@@ -185,8 +293,323 @@ fn clusters(rows: &[f64], d: usize, leaf: usize) -> Clusters {
     }
 }
 
+/// `|a − b|²` in f64, summed in eight lanes (vectorised). Every strategy
+/// decides with this one function, so all return the same row.
+#[inline(always)]
 fn dist2(a: &[f64], b: &[f64]) -> f64 {
-    a.iter().zip(b).map(|(x, y)| (x - y) * (x - y)).sum()
+    dist2_below(a, b, f64::INFINITY).unwrap_or(f64::NAN)
+}
+
+/// [`NnStrategy::Auto`] uses the prefix search above the first dimension,
+/// and without guesses only up to the second.
+const PREFIX_NO_GUESS: (usize, usize) = (40, 96);
+
+/// The prefix search ([`NnStrategy::Prefix`]). Per block of queries, one
+/// f32 GEMM over the leading `m` coordinates gives every pair's partial
+/// score `|x_m|² − 2 q_m·x_m`, within a rigorous rounding bound `e` of its
+/// exact value. With `ub` the full f64 distance to the best-ranked row (or
+/// to the hint, if smaller), the nearest row x* satisfies
+/// `|q_m − x*_m|² ≤ |q − x*|² ≤ ub`, so its computed score is at most
+/// `ub − |q_m|² + e`: only rows under that bar get a full distance.
+fn prefix_search(
+    data: &DMatrix<f64>,
+    queries: &DMatrix<f64>,
+    hint: Option<&[usize]>,
+) -> Vec<usize> {
+    let (nx, d, nq) = (data.nrows(), data.ncols(), queries.nrows());
+    let m = PREFIX_DIM.min(d);
+    // Both sets in a spatially coherent order (principal-direction
+    // bisection on the prefix): consecutive queries then share most of
+    // their surviving rows, which stay in cache, contiguous.
+    let prefix_rows = |a: &DMatrix<f64>| -> Vec<f64> {
+        let n = a.nrows();
+        let mut out = vec![0.0; n * m];
+        for j in 0..m {
+            for (i, v) in a.column(j).iter().enumerate() {
+                out[i * m + j] = *v;
+            }
+        }
+        out
+    };
+    let (order_x, order_q) = rayon::join(
+        || {
+            let mut o: Vec<usize> = (0..nx).collect();
+            split(&prefix_rows(data), m, &mut o, 0, ORDER_LEAF);
+            o
+        },
+        || {
+            let mut o: Vec<usize> = (0..nq).collect();
+            split(&prefix_rows(queries), m, &mut o, 0, ORDER_LEAF);
+            o
+        },
+    );
+    let mut pos_x = vec![0usize; nx];
+    for (p, &i) in order_x.iter().enumerate() {
+        pos_x[i] = p;
+    }
+    let mut x_rows = vec![0.0; nx * d];
+    for (p, &i) in order_x.iter().enumerate() {
+        for j in 0..d {
+            x_rows[p * d + j] = data[(i, j)];
+        }
+    }
+    let mut q_rows = vec![0.0; nq * d];
+    for (p, &i) in order_q.iter().enumerate() {
+        for j in 0..d {
+            q_rows[p * d + j] = queries[(i, j)];
+        }
+    }
+    let xm_norm: Vec<f64> = x_rows
+        .chunks(d)
+        .map(|r| r[..m].iter().map(|v| v * v).sum())
+        .collect();
+    let xm_norm_max = xm_norm.iter().fold(0.0f64, |a, &b| a.max(b));
+    let ctx = Prefix {
+        d,
+        m,
+        xn32: xm_norm.iter().map(|&v| v as f32).collect(),
+        x32: Mat::<f32>::from_fn(nx, m, |p, j| x_rows[p * d + j] as f32),
+        x_rows,
+        xm_norm_max,
+        q_rows,
+        order_x,
+        pos_x,
+        hint: hint.map(|h| {
+            order_q
+                .iter()
+                .map(|&i| h.get(i).copied().unwrap_or(usize::MAX))
+                .collect()
+        }),
+    };
+    let starts: Vec<usize> = (0..nq).step_by(PREFIX_BLOCK).collect();
+    let found: Vec<Vec<usize>> = starts
+        .par_iter()
+        .map_init(
+            || Mat::<f32>::zeros(nx, PREFIX_BLOCK),
+            |buf, &q0| {
+                let rows = PREFIX_BLOCK.min(nq - q0);
+                let q = Mat::<f32>::from_fn(rows, m, |i, j| ctx.q_rows[(q0 + i) * d + j] as f32);
+                matmul(
+                    buf.as_mut().subcols_mut(0, rows),
+                    Accum::Replace,
+                    ctx.x32.as_ref(),
+                    q.transpose(),
+                    1.0f32,
+                    Par::Seq,
+                );
+                prefix_block(&ctx, q0, rows, buf)
+            },
+        )
+        .collect();
+    let mut out = vec![0; nq];
+    for (p, x) in found.into_iter().flatten().enumerate() {
+        out[order_q[p]] = x;
+    }
+    out
+}
+
+/// The prefix search's data, both sets in their coherent order.
+struct Prefix {
+    d: usize,
+    m: usize,
+    /// Data rows (f64, row-major), their prefix in f32 (column-major) and
+    /// the squared norms of the prefixes.
+    x_rows: Vec<f64>,
+    x32: Mat<f32>,
+    xn32: Vec<f32>,
+    xm_norm_max: f64,
+    /// Query rows (f64, row-major).
+    q_rows: Vec<f64>,
+    /// Original index of each data position, and its inverse.
+    order_x: Vec<usize>,
+    pos_x: Vec<usize>,
+    /// Original data index guessed for each query position.
+    hint: Option<Vec<usize>>,
+}
+
+dispatched! {
+    /// The nearest rows (original indices) of queries `q0..q0 + rows`
+    /// given their prefix scores in the first columns of `s` (f32, one
+    /// column per query).
+    fn prefix_block(this: &Prefix, q0: usize, rows: usize, s: &Mat<f32>) -> Vec<usize> {
+        let mut out = Vec::with_capacity(rows);
+        let (d, m, nx) = (this.d, this.m, this.xn32.len());
+        let mut last = usize::MAX;
+        let u = f64::from(f32::EPSILON) / 2.0;
+        let mut cand: Vec<(f32, u32)> = Vec::new();
+        for i in 0..rows {
+            let qi = &this.q_rows[(q0 + i) * d..(q0 + i + 1) * d];
+            let qm_norm: f64 = qi[..m].iter().map(|v| v * v).sum();
+            let col = &s.col_as_slice(i)[..nx];
+            // Rounding of a computed score: the f32 inputs and dot product
+            // ((m + 2) u |q||x| twice), |x_m|² to f32 and the subtraction;
+            // doubled for safety.
+            let err = 2.0 * (m as f64 + 5.0) * u * (qm_norm + this.xm_norm_max);
+            let bar = |ub: f64| {
+                let bar = ub * (1.0 + 1e-12) - qm_norm + err + 1e-300;
+                let b32 = bar as f32;
+                if f64::from(b32) < bar { b32.next_up() } else { b32 }
+            };
+            // (distance, original index): ties go to the smaller original
+            // index, as in every strategy.
+            let mut best = (f64::INFINITY, usize::MAX);
+            #[inline(always)]
+            fn consider(this: &Prefix, qi: &[f64], p: usize, best: &mut (f64, usize)) {
+                let d = this.d;
+                if let Some(dk) = dist2_below(&this.x_rows[p * d..(p + 1) * d], qi, best.0)
+                    && (dk < best.0 || this.order_x[p] < best.1)
+                {
+                    *best = (dk, this.order_x[p]);
+                }
+            }
+            let consider = |p: usize, best: &mut (f64, usize)| consider(this, qi, p, best);
+            // Upper bounds: the guess, else the best-ranked row; and the
+            // previous query's answer (the queries are in coherent order,
+            // so it is usually close).
+            match this.hint.as_ref().map(|h| h[q0 + i]) {
+                Some(h) if h < nx => consider(this.pos_x[h], &mut best),
+                _ => consider(argmin_score(&this.xn32, col), &mut best),
+            }
+            if last < nx {
+                consider(last, &mut best);
+            }
+            cand.clear();
+            for_each_under(&this.xn32, col, bar(best.0), |p, score| {
+                cand.push((score, p as u32))
+            });
+            // The best-ranked few first: their distances lower the bar for
+            // all the others.
+            if cand.len() > FIRST {
+                cand.select_nth_unstable_by(FIRST, |a, b| a.0.total_cmp(&b.0));
+                for &(_, p) in &cand[..FIRST] {
+                    consider(p as usize, &mut best);
+                }
+                let b = bar(best.0);
+                for &(score, p) in &cand[FIRST..] {
+                    if score <= b {
+                        consider(p as usize, &mut best);
+                    }
+                }
+            } else {
+                for &(_, p) in cand.iter() {
+                    consider(p as usize, &mut best);
+                }
+            }
+            out.push(best.1);
+            last = this.pos_x.get(best.1).copied().unwrap_or(usize::MAX);
+        }
+        out
+    }
+}
+
+/// Points per leaf of the bisection that orders both sets.
+const ORDER_LEAF: usize = 16;
+/// Queries per block of the prefix search.
+const PREFIX_BLOCK: usize = 128;
+
+/// Candidates of the prefix search whose distance is computed before the
+/// bar is lowered.
+const FIRST: usize = 16;
+
+#[inline(always)]
+/// [`dist2`] when it is at most `bound`, else `None` (possibly decided
+/// early: partial sums only grow, and are rounded no higher than the full
+/// sum, so a partial sum above the bound proves the full one is).
+fn dist2_below(a: &[f64], b: &[f64], bound: f64) -> Option<f64> {
+    let n = a.len().min(b.len());
+    let mut lanes = [0.0f64; 8];
+    let total = |l: &[f64; 8]| ((l[0] + l[4]) + (l[1] + l[5])) + ((l[2] + l[6]) + (l[3] + l[7]));
+    let mut i = 0;
+    // 32 coordinates per step (lane j takes j, j + 8, ...: the order of
+    // eight-wide chunks), then a check against the bound.
+    while i + 32 <= n {
+        let (x, y) = (&a[i..i + 32], &b[i..i + 32]);
+        for c in 0..4 {
+            for j in 0..8 {
+                let t = x[c * 8 + j] - y[c * 8 + j];
+                lanes[j] += t * t;
+            }
+        }
+        if total(&lanes) > bound {
+            return None;
+        }
+        i += 32;
+    }
+    while i + 8 <= n {
+        let (x, y) = (&a[i..i + 8], &b[i..i + 8]);
+        for j in 0..8 {
+            let t = x[j] - y[j];
+            lanes[j] += t * t;
+        }
+        i += 8;
+    }
+    for j in 0..n - i {
+        let t = a[i + j] - b[i + j];
+        lanes[j] += t * t;
+    }
+    let d = total(&lanes);
+    (d <= bound).then_some(d)
+}
+
+/// The index of the smallest score `xn[k] − 2 col[k]` (f32; used only as
+/// a candidate, so its own rounding does not matter).
+#[inline(always)]
+fn argmin_score(xn: &[f32], col: &[f32]) -> usize {
+    const L: usize = 16;
+    let mut val = [f32::INFINITY; L];
+    let mut idx = [0u32; L];
+    let (cx, cc) = (xn.chunks_exact(L), col.chunks_exact(L));
+    let n = col.len() - cc.remainder().len();
+    for (c, (x, v)) in cx.zip(cc).enumerate() {
+        let base = (c * L) as u32;
+        for j in 0..L {
+            let s = x[j] - 2.0 * v[j];
+            let better = s < val[j];
+            val[j] = if better { s } else { val[j] };
+            idx[j] = if better { base + j as u32 } else { idx[j] };
+        }
+    }
+    let mut best = (f32::INFINITY, 0usize);
+    for j in 0..L {
+        if val[j] < best.0 {
+            best = (val[j], idx[j] as usize);
+        }
+    }
+    for k in n..col.len() {
+        let s = xn[k] - 2.0 * col[k];
+        if s < best.0 {
+            best = (s, k);
+        }
+    }
+    best.1
+}
+
+/// Calls `f(k, score)` for every k (ascending) with score
+/// `xn[k] − 2 col[k] <= bar`, testing 16 rows per step.
+#[inline(always)]
+fn for_each_under(xn: &[f32], col: &[f32], bar: f32, mut f: impl FnMut(usize, f32)) {
+    const L: usize = 16;
+    let (cx, cc) = (xn.chunks_exact(L), col.chunks_exact(L));
+    let n = col.len() - cc.remainder().len();
+    for (c, (x, v)) in cx.zip(cc).enumerate() {
+        let mut score = [0.0f32; L];
+        let mut mask = 0u32;
+        for j in 0..L {
+            score[j] = x[j] - 2.0 * v[j];
+            mask |= u32::from(score[j] <= bar) << j;
+        }
+        while mask != 0 {
+            let j = mask.trailing_zeros() as usize;
+            f(c * L + j, score[j]);
+            mask &= mask - 1;
+        }
+    }
+    for k in n..col.len() {
+        let score = xn[k] - 2.0 * col[k];
+        if score <= bar {
+            f(k, score);
+        }
+    }
 }
 
 /// Splits `idx` (points `offset..offset + idx.len()` of the final order)
@@ -390,4 +813,37 @@ fn tree_search(data: &DMatrix<f64>, queries: &DMatrix<f64>) -> Vec<usize> {
         out[q] = x;
     }
     out
+}
+
+/// Runtime detection of the vector instructions the kernels are compiled
+/// for (the build targets baseline x86-64; faer's GEMMs dispatch on their
+/// own). Every level runs the same code, so computes the same values: no
+/// FMA contraction, the same summation order.
+#[cfg(target_arch = "x86_64")]
+mod simd {
+    use std::sync::OnceLock;
+
+    /// AVX-512 (F, BW, VL) with AVX2 and FMA.
+    pub fn has_v4() -> bool {
+        static V4: OnceLock<bool> = OnceLock::new();
+        *V4.get_or_init(|| {
+            std::arch::is_x86_feature_detected!("avx512f")
+                && std::arch::is_x86_feature_detected!("avx512bw")
+                && std::arch::is_x86_feature_detected!("avx512vl")
+                && has_v3()
+        })
+    }
+
+    /// AVX2 with FMA, BMI and the bit-count instructions.
+    pub fn has_v3() -> bool {
+        static V3: OnceLock<bool> = OnceLock::new();
+        *V3.get_or_init(|| {
+            std::arch::is_x86_feature_detected!("avx2")
+                && std::arch::is_x86_feature_detected!("fma")
+                && std::arch::is_x86_feature_detected!("bmi1")
+                && std::arch::is_x86_feature_detected!("bmi2")
+                && std::arch::is_x86_feature_detected!("popcnt")
+                && std::arch::is_x86_feature_detected!("lzcnt")
+        })
+    }
 }

@@ -65,7 +65,7 @@ fn nearest_rows_matches_a_naive_search() {
             .wrapping_add(1442695040888963407);
         ((s >> 11) as f64 / (1u64 << 53) as f64) - 0.5
     };
-    for d in [1, 3, 17, 64] {
+    for d in [1, 3, 17, 33, 64] {
         let nx = 700;
         let mut x = DMatrix::from_fn(nx, d, |_, _| rnd());
         // Row 5 duplicates row 2: a tie resolved to the smaller index.
@@ -77,7 +77,12 @@ fn nearest_rows_matches_a_naive_search() {
         // of the other candidates, resolved by the direct re-check.
         let r9 = x.row(9).map(|v| v + 1e-13);
         q.row_mut(1).copy_from(&r9);
-        for strategy in [NnStrategy::Auto, NnStrategy::Brute, NnStrategy::Tree] {
+        for strategy in [
+            NnStrategy::Auto,
+            NnStrategy::Brute,
+            NnStrategy::Tree,
+            NnStrategy::Prefix,
+        ] {
             let got = nearest_rows_with(&x, &q, strategy);
             for (i, &g) in got.iter().enumerate() {
                 let dist = |k: usize| (x.row(k) - q.row(i)).norm_squared();
@@ -113,6 +118,44 @@ fn tree_search_equals_brute_force_on_spectral_embeddings() {
         assert_eq!(brute, tree, "k = {k}");
         // The unperturbed embedding maps every vertex to itself.
         let own = nearest_rows_with(&x, &x, NnStrategy::Tree);
+        assert!(own.iter().enumerate().all(|(i, &j)| i == j), "k = {k}");
+    }
+}
+
+/// The prefix search on spectral embeddings (dimensions above the prefix,
+/// where it is used): equal to brute force for every query, with no guess,
+/// with exact guesses, with wrong and out-of-range guesses (on ~1100 rows,
+/// where `Auto` picks it too).
+#[test]
+fn prefix_search_equals_brute_force_whatever_the_guesses() {
+    let b = basis(&common::bumpy(48, 24), 80);
+    let n = b.n();
+    for k in [PREFIX_DIM + 1, 48, 80] {
+        let x = b.eigenvectors.columns(0, k).into_owned();
+        // Queries: rows moved by a perturbation that grows with the
+        // frequency (as a noisy functional map does), plus far points.
+        let mut q = DMatrix::from_fn(n, k, |i, j| {
+            x[(i, j)] * (1.0 + 0.3 * (j as f64 / k as f64) * ((i * 13 + j * 7) as f64).sin())
+        });
+        for i in 0..10 {
+            q.row_mut(i).iter_mut().for_each(|v| *v = 3.0 + i as f64);
+        }
+        let brute = nearest_rows_with(&x, &q, NnStrategy::Brute);
+        assert_eq!(
+            nearest_rows_with(&x, &q, NnStrategy::Prefix),
+            brute,
+            "k = {k}"
+        );
+        assert_eq!(nearest_rows(&x, &q), brute, "k = {k}, auto");
+        let shifted: Vec<usize> = brute.iter().map(|&t| (t + 17) % n).collect();
+        let wild: Vec<usize> = (0..n)
+            .map(|i| if i % 3 == 0 { n + i } else { (i * 31) % n })
+            .collect();
+        for hint in [&brute, &shifted, &wild] {
+            assert_eq!(nearest_rows_hinted(&x, &q, hint), brute, "k = {k}");
+        }
+        // Every row is its own nearest (no two vertices share an embedding).
+        let own = nearest_rows_with(&x, &x, NnStrategy::Prefix);
         assert!(own.iter().enumerate().all(|(i, &j)| i == j), "k = {k}");
     }
 }
@@ -168,6 +211,26 @@ fn nearest_rows_resolves_below_f32_precision() {
         });
         assert_eq!(nearest_rows(&x, &q), vec![target]);
         assert_eq!(nearest_rows_with(&x, &q, NnStrategy::Tree), vec![target]);
+    }
+    // The same in a dimension where the prefix search applies: the near
+    // ties differ only beyond the prefix.
+    let d = PREFIX_DIM + 8;
+    let base: Vec<f64> = (0..d).map(|j| 1.0 + 0.37 * j as f64).collect();
+    let off = PREFIX_DIM + 3;
+    let x = DMatrix::from_fn(50, d, |i, j| {
+        base[j] + if j == off { 1e-9 * i as f64 } else { 0.0 }
+    });
+    for target in [0usize, 17, 49] {
+        let q = DMatrix::from_fn(1, d, |_, j| {
+            base[j]
+                + if j == off {
+                    1e-9 * target as f64 + 2e-10
+                } else {
+                    0.0
+                }
+        });
+        assert_eq!(nearest_rows_with(&x, &q, NnStrategy::Prefix), vec![target]);
+        assert_eq!(nearest_rows_hinted(&x, &q, &[3]), vec![target]);
     }
 }
 

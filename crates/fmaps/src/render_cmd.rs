@@ -535,16 +535,16 @@ fn read_matrix(path: &Path) -> Result<nalgebra::DMatrix<f64>, Failure> {
             .filter(|s| !s.is_empty())
             .map(|s| parse_number(s, path, i + 1))
             .collect::<Result<Vec<f64>, Failure>>()?;
-        if let Some(first) = rows.first() {
-            if row.len() != first.len() {
-                return Err(input(anyhow::anyhow!(
-                    "{}:{}: {} entries, but the first row has {}",
-                    path.display(),
-                    i + 1,
-                    row.len(),
-                    first.len()
-                )));
-            }
+        if let Some(first) = rows.first()
+            && row.len() != first.len()
+        {
+            return Err(input(anyhow::anyhow!(
+                "{}:{}: {} entries, but the first row has {}",
+                path.display(),
+                i + 1,
+                row.len(),
+                first.len()
+            )));
         }
         rows.push(row);
     }

@@ -236,13 +236,13 @@ impl DijkstraSolver {
                 continue;
             }
             done[v] = true;
-            if let Some((want, left)) = remaining.as_mut() {
-                if want[v] {
-                    want[v] = false;
-                    *left -= 1;
-                    if *left == 0 {
-                        break;
-                    }
+            if let Some((want, left)) = remaining.as_mut()
+                && want[v]
+            {
+                want[v] = false;
+                *left -= 1;
+                if *left == 0 {
+                    break;
                 }
             }
             for &(u, l) in &self.topo.neighbours[v] {

@@ -46,10 +46,8 @@ impl Topology {
             len.push(l);
         }
         let fa = mesh.face_adjacency();
-        if exact {
-            if let Some(&[a, b]) = fa.non_manifold_edges.first() {
-                return Err(Error::NonManifoldEdge { a, b });
-            }
+        if exact && let Some(&[a, b]) = fa.non_manifold_edges.first() {
+            return Err(Error::NonManifoldEdge { a, b });
         }
         let adj = fa.across;
         let mut ring = vec![Vec::new(); n];

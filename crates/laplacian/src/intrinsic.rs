@@ -30,10 +30,10 @@ pub(crate) fn intrinsic_delaunay(mesh: &TriMesh) -> (Vec<[usize; 3]>, Vec<[f64; 
     let mut adj = mesh.face_adjacency().across;
     for f in 0..faces.len() {
         for k in 0..3 {
-            if let Some((g, j)) = adj[f][k] {
-                if g == f || faces[f][(k + 1) % 3] != faces[g][(j + 2) % 3] {
-                    adj[f][k] = None;
-                }
+            if let Some((g, j)) = adj[f][k]
+                && (g == f || faces[f][(k + 1) % 3] != faces[g][(j + 2) % 3])
+            {
+                adj[f][k] = None;
             }
         }
     }

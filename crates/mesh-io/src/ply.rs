@@ -138,14 +138,14 @@ pub fn parse_ply(data: &[u8]) -> Result<TriMesh> {
                 "the 'face' element has no list property 'vertex_indices'",
             )
         })?;
-    if let Property::List { item, .. } = &fel.props[index_slot] {
-        if !item.is_integer() {
-            return Err(parse_err(
-                FMT,
-                Location::Line(fel.line),
-                "face indices must have an integer type",
-            ));
-        }
+    if let Property::List { item, .. } = &fel.props[index_slot]
+        && !item.is_integer()
+    {
+        return Err(parse_err(
+            FMT,
+            Location::Line(fel.line),
+            "face indices must have an integer type",
+        ));
     }
     let nv = vel.count;
     let nf = fel.count;

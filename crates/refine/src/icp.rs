@@ -64,19 +64,19 @@ impl Refiner for Icp {
             nn_seconds: 0.0,
             seconds: 0.0,
         };
-        let nn = |c: &DMatrix<f64>, report: &mut RefineReport| {
+        let nn = |c: &DMatrix<f64>, hint: Option<&[usize]>, report: &mut RefineReport| {
             let t = Instant::now();
-            let map = point_map(c, phi_a, phi_b, self.adjoint);
+            let map = point_map(c, phi_a, phi_b, self.adjoint, hint);
             report.nn_searches += 1;
             report.nn_seconds += t.elapsed().as_secs_f64();
             map
         };
         let mut c = c_ab.clone();
-        let mut t_ba = nn(&c, &mut report);
+        let mut t_ba = nn(&c, None, &mut report);
         for _ in 0..self.max_iterations {
             let ti = Instant::now();
             c = nearest_orthonormal(pullback(&t_ba, phi_a, ka, phi_b, kb, mass_b));
-            let next = nn(&c, &mut report);
+            let next = nn(&c, Some(&t_ba), &mut report);
             let changed = count_changed(Some(&t_ba), &next);
             t_ba = next;
             report.iterations.push(Iteration {

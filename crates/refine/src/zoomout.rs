@@ -216,9 +216,12 @@ impl Refiner for ZoomOut {
             nn_seconds: 0.0,
             seconds: 0.0,
         };
-        let mut nn = |c: &DMatrix<f64>, data: &DMatrix<f64>, queries: &DMatrix<f64>| {
+        let mut nn = |c: &DMatrix<f64>,
+                      data: &DMatrix<f64>,
+                      queries: &DMatrix<f64>,
+                      hint: Option<&[usize]>| {
             let t = Instant::now();
-            let map = point_map(c, data, queries, self.adjoint);
+            let map = point_map(c, data, queries, self.adjoint, hint);
             report.nn_searches += 1;
             report.nn_seconds += t.elapsed().as_secs_f64();
             map
@@ -226,15 +229,17 @@ impl Refiner for ZoomOut {
         let k0 = self.k_start;
         let mut c = c_ab.view((0, 0), (k0, k0)).into_owned();
         let mut prev: Option<Vec<usize>> = None;
+        let mut prev_ab: Option<Vec<usize>> = None;
         let mut iterations = Vec::new();
         for k in self.schedule() {
             let ti = Instant::now();
-            let t_ba = nn(&c, &side_a.phi, &side_b.phi);
+            let t_ba = nn(&c, &side_a.phi, &side_b.phi, prev.as_deref());
             let mut next = fit(&t_ba, &side_a, k, &side_b, k)?;
             if self.bijective {
                 let ct = c.transpose();
-                let t_ab = nn(&ct, &side_b.phi, &side_a.phi);
+                let t_ab = nn(&ct, &side_b.phi, &side_a.phi, prev_ab.as_deref());
                 let c_ba = fit(&t_ab, &side_b, k, &side_a, k)?;
+                prev_ab = Some(t_ab);
                 next = (next + c_ba.transpose()) * 0.5;
             }
             c = next;
@@ -247,9 +252,9 @@ impl Refiner for ZoomOut {
         }
         // The output: the final C converted on all vertices.
         let t_ba = if sub.is_some() {
-            nn(&c, &basis_a.eigenvectors, &basis_b.eigenvectors)
+            nn(&c, &basis_a.eigenvectors, &basis_b.eigenvectors, None)
         } else {
-            nn(&c, &side_a.phi, &side_b.phi)
+            nn(&c, &side_a.phi, &side_b.phi, prev.as_deref())
         };
         report.iterations = iterations;
         report.converged = true;
