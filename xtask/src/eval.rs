@@ -47,8 +47,8 @@ pub struct Args {
 enum MapSource {
     /// A method of the dataset's `maps/*.zip`.
     Published(fmaps::eval::PublishedMaps),
-    /// `fmaps-init`, `fmaps-icp`, `fmaps-zoomout[:START:FINAL:STEP]`: the
-    /// fmaps pipeline, run here.
+    /// `fmaps-init`, `fmaps-icp`, `fmaps-zoomout[:START:FINAL:STEP][@..]`:
+    /// the fmaps pipeline, run here.
     Pipeline(Box<PipelineCache>),
     /// pyFM's maps from `pyfm_pipeline.py` with its per-pair timings.
     PyFm {
@@ -144,7 +144,9 @@ impl MapSource {
 /// `fmaps-zoomout:START:FINAL:STEP`; any of them with `@K1,K2,..` appended
 /// adds starts at those initial sizes ([`fmaps::MatchParams::starts`]),
 /// and `@K1,K2<SCORE` tries them only when the first map's orientation
-/// score is below SCORE ([`fmaps::MatchParams::restart_below`]).
+/// score is below SCORE ([`fmaps::MatchParams::restart_below`]). The
+/// ZoomOut methods start from [`fmaps::pipeline::ZOOMOUT_STARTS`] as
+/// well unless told otherwise, as `fmaps match` does; `@none`: one start.
 fn pipeline_method(method: &str) -> anyhow::Result<Option<PipelineMethod>> {
     use fmaps::pipeline::Refinement;
     let (method, starts, restart_below) = match method.split_once('@') {
@@ -159,12 +161,18 @@ fn pipeline_method(method: &str) -> anyhow::Result<Option<PipelineMethod>> {
                     ),
                     None => (spec, None),
                 };
-            let starts = list
-                .split(',')
-                .map(str::parse)
-                .collect::<Result<Vec<usize>, _>>()
-                .with_context(|| format!("method {m}@{spec}: expected @K1,K2,.."))?;
+            let starts = if list == "none" {
+                Vec::new()
+            } else {
+                list.split(',')
+                    .map(str::parse)
+                    .collect::<Result<Vec<usize>, _>>()
+                    .with_context(|| format!("method {m}@{spec}: expected @K1,K2,.. or @none"))?
+            };
             (m, starts, below)
+        }
+        _ if method.starts_with("fmaps-zoomout") => {
+            (method, fmaps::pipeline::ZOOMOUT_STARTS.to_vec(), None)
         }
         _ => (method, Vec::new(), None),
     };
@@ -381,7 +389,8 @@ pub fn eval(args: &Args) -> anyhow::Result<()> {
         for (ours_m, peer_m) in [
             ("fmaps-init", "pyfm:fm_orient"),
             ("fmaps-icp", "pyfm:fm_orient_icp"),
-            ("fmaps-zoomout", "pyfm:fm_orient_zoomout"),
+            // The single-start ZoomOut is pyFM's pipeline step for step.
+            ("fmaps-zoomout@none", "pyfm:fm_orient_zoomout"),
         ] {
             if let (Some(ours), Some(peer)) = (time(ours_m), time(peer_m)) {
                 println!(

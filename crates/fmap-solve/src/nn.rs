@@ -9,7 +9,7 @@
 //!
 //! In high dimensions most of that work can be skipped ([`NnStrategy::Prefix`]):
 //! spectral embeddings spread mostly along their leading (low-frequency)
-//! coordinates, so the distance over a 32-coordinate prefix, which bounds
+//! coordinates, so the distance over a 40-coordinate prefix, which bounds
 //! the full distance from below, already exceeds the nearest distance for
 //! all but a few percent of the rows. Guesses (the previous iteration's
 //! map in ZoomOut and ICP, [`nearest_rows_hinted`]) give the upper bound
@@ -87,7 +87,7 @@ pub enum NnStrategy {
 }
 
 /// Leading coordinates on which [`NnStrategy::Prefix`] ranks every pair.
-pub const PREFIX_DIM: usize = 32;
+pub const PREFIX_DIM: usize = 40;
 
 /// For every row of `queries` (n_q x d), the index of the nearest row of
 /// `data` (n_x x d); [`NnStrategy::Auto`]. Panics if the dimensions differ
@@ -149,14 +149,14 @@ fn search(
         // (`cargo xtask bench-refine`): the tree is 3x faster than brute
         // force at d = 10 and still ahead at d = 30, slower from d ≈ 50
         // (cluster radii grow with the frequencies in the embedding). The
-        // prefix search wins from d ≈ 40: without a guess up to d ≈ 100
-        // (at d = 50 it takes 0.037 s against 0.043 brute, 0.050 tree;
-        // 0.065 against 0.063 brute at d = 100), with the previous
-        // iteration's map as guesses at every larger d (d = 100 / 150 /
-        // 200: 0.044 / 0.061 / 0.079 s against 0.063 / 0.086 / 0.110).
+        // prefix search needs a good upper bound: with the previous
+        // iteration's map as guesses it takes 0.048 / 0.063 s at d = 100 /
+        // 150 inside ZoomOut 50:150:5 (brute force: 0.063 / 0.086);
+        // without guesses, on a noisy initial map, 3x longer than brute
+        // force; and at d < 64 (d = 55: 0.080 s against 0.045), where the
+        // prefix is most of the work and early ZoomOut maps are noisy.
         NnStrategy::Auto => {
-            let prefix =
-                nx >= 1024 && d > PREFIX_NO_GUESS.0 && (hint.is_some() || d <= PREFIX_NO_GUESS.1);
+            let prefix = nx >= 1024 && d >= PREFIX_FROM && hint.is_some();
             if prefix {
                 NnStrategy::Prefix
             } else if (1..=TREE_MAX_DIM).contains(&d)
@@ -300,9 +300,9 @@ fn dist2(a: &[f64], b: &[f64]) -> f64 {
     dist2_below(a, b, f64::INFINITY).unwrap_or(f64::NAN)
 }
 
-/// [`NnStrategy::Auto`] uses the prefix search above the first dimension,
-/// and without guesses only up to the second.
-const PREFIX_NO_GUESS: (usize, usize) = (40, 96);
+/// Smallest dimension [`NnStrategy::Auto`] uses the prefix search from
+/// (with guesses).
+const PREFIX_FROM: usize = 64;
 
 /// The prefix search ([`NnStrategy::Prefix`]). Per block of queries, one
 /// f32 GEMM over the leading `m` coordinates gives every pair's partial
@@ -503,7 +503,7 @@ dispatched! {
 }
 
 /// Points per leaf of the bisection that orders both sets.
-const ORDER_LEAF: usize = 16;
+const ORDER_LEAF: usize = 64;
 /// Queries per block of the prefix search.
 const PREFIX_BLOCK: usize = 128;
 

@@ -125,7 +125,7 @@ fn tree_search_equals_brute_force_on_spectral_embeddings() {
 /// The prefix search on spectral embeddings (dimensions above the prefix,
 /// where it is used): equal to brute force for every query, with no guess,
 /// with exact guesses, with wrong and out-of-range guesses (on ~1100 rows,
-/// where `Auto` picks it too).
+/// where `nearest_rows_hinted` picks it from d = 64).
 #[test]
 fn prefix_search_equals_brute_force_whatever_the_guesses() {
     let b = basis(&common::bumpy(48, 24), 80);

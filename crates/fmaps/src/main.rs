@@ -203,13 +203,16 @@ struct MatchArgs {
     /// Convert maps with the adjoint of C (initial map and refinement).
     #[arg(long)]
     adjoint: bool,
-    /// Multi-start: also run from initial maps of these sizes (e.g.
-    /// `20,30`) and keep the final map whose orientation is best preserved.
-    #[arg(long, value_delimiter = ',', value_name = "K1,K2,..")]
-    starts: Vec<usize>,
-    /// With --starts: try the further starts only when the first map's
-    /// orientation score is below this (well-oriented pairs cost one run).
-    #[arg(long, requires = "starts", value_name = "SCORE")]
+    /// Multi-start: also run from initial maps of these sizes and keep
+    /// the final map whose orientation is best preserved; `none` for a
+    /// single start. Default: `20,30` with --refine zoomout (measured:
+    /// fewer left/right swaps, see README), none otherwise.
+    #[arg(long, value_name = "K1,K2,..|none")]
+    starts: Option<String>,
+    /// With several starts: try the further starts only when the first
+    /// map's orientation score is below this (well-oriented pairs cost one
+    /// run).
+    #[arg(long, value_name = "SCORE")]
     restart_below: Option<f64>,
     /// Write C_BA (k x k, functions on B to functions on A) as text.
     #[arg(long)]
@@ -953,9 +956,28 @@ fn match_cmd(args: &MatchArgs) -> Result<(), Failure> {
         params.landmarks = read_landmarks(p)?;
     }
     params.adjoint = args.adjoint;
-    params.starts = args.starts.clone();
-    params.restart_below = args.restart_below;
     params.refine = refinement(args)?;
+    params.starts = match args.starts.as_deref().map(str::trim) {
+        Some("none") => Vec::new(),
+        Some(list) => match list.split(',').map(|s| s.trim().parse::<usize>()).collect() {
+            Ok(v) => v,
+            Err(_) => {
+                return Err(input(anyhow::anyhow!(
+                    "--starts '{list}': expected sizes K1,K2,.. (e.g. 20,30) or none"
+                )));
+            }
+        },
+        // The default further starts, those the computed basis allows.
+        None if matches!(params.refine, fmaps::pipeline::Refinement::ZoomOut { .. }) => {
+            let k_process = params.k_process.max(params.refine.k_needed());
+            fmaps::pipeline::ZOOMOUT_STARTS
+                .into_iter()
+                .filter(|&s| s <= k_process)
+                .collect()
+        }
+        None => Vec::new(),
+    };
+    params.restart_below = args.restart_below;
     params.k_process = params.k_process.max(params.refine.k_needed());
     let spinner = Spinner::new("matching");
     let r = match_shapes_with_progress(&a, &b, &params, &|s| spinner.stage(s)).map_err(

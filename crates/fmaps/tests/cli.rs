@@ -312,7 +312,7 @@ fn match_writes_a_one_based_map_and_reports_stages() {
         fmaps()
             .args(["match", &s(&mesh), &s(&mesh), "--json"])
             .args(["--k", "12", "--k-process", "20", "--n-descr", "30"])
-            .args(["--zoomout", "8:20:4"]),
+            .args(["--zoomout", "8:20:4", "--starts", "none"]),
     );
     assert_eq!(v["refine"]["method"], "zoomout 8:20:4");
     assert_eq!(v["refine"]["iterations"], 3);
@@ -320,6 +320,21 @@ fn match_writes_a_one_based_map_and_reports_stages() {
     // The map of a shape to itself keeps its orientation.
     assert!(v["orientation"].as_f64().unwrap() > 0.9, "{v}");
     assert_eq!(v["starts"].as_array().unwrap().len(), 0);
+    // ZoomOut runs multi-start by default (sizes 20 and 30 besides k, those
+    // within the computed basis: here 20).
+    let v = json_of(
+        fmaps()
+            .args(["match", &s(&mesh), &s(&mesh), "--json"])
+            .args(["--k", "12", "--k-process", "20", "--n-descr", "30"])
+            .args(["--zoomout", "8:20:4"]),
+    );
+    let ks: Vec<u64> = v["starts"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|s| s["k"].as_u64().unwrap())
+        .collect();
+    assert_eq!(ks, [12, 20]);
     // Multi-start: one entry per distinct size, exactly one kept.
     let out = fmaps()
         .args(["match", &s(&mesh), &s(&mesh), "--json"])
@@ -334,6 +349,12 @@ fn match_writes_a_one_based_map_and_reports_stages() {
     assert_eq!(ks, [12, 6, 10]);
     let kept = starts.iter().filter(|s| s["chosen"] == true).count();
     assert_eq!(kept, 1, "{v}");
+    let out = fmaps()
+        .args(["match", &s(&mesh), &s(&mesh), "--starts", "6,x"])
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("--starts '6,x'"));
     for bad in ["8:20", "0:20:1", "30:20:1", "8:20:x", "20:40:5"] {
         let out = fmaps()
             .args(["match", &s(&mesh), &s(&mesh), "--k", "12", "--zoomout", bad])
