@@ -24,7 +24,7 @@ use fmaps::eval::{Collection, EvalParams, evaluate};
 use fmaps::geodesic::ExactSolver;
 use fmaps::pipeline::{MatchParams, match_prepared, prepare};
 use fmaps::refine::{Icp, Refiner, ZoomOut};
-use fmaps::solve::{NnStrategy, nearest_rows_with};
+use fmaps::solve::{NnStrategy, nearest_rows_hinted, nearest_rows_with};
 use nalgebra::DMatrix;
 use serde_json::json;
 
@@ -209,12 +209,13 @@ pub fn bench_refine(args: &Args) -> anyhow::Result<()> {
         basis_1.n()
     );
     println!(
-        "{:>4} {:>11} {:>11} {:>12} {:>11} {:>13} {:>11} {:>9} {:>9}  agree",
+        "{:>4} {:>11} {:>11} {:>12} {:>11} {:>13} {:>13} {:>11} {:>9} {:>9}  agree",
         "k",
         "fmaps tree",
         "fmaps brute",
         "fmaps prefix",
         "fmaps auto",
+        "auto+guesses",
         "sklearn brute",
         "cKDTree",
         "vs sklearn",
@@ -245,6 +246,21 @@ pub fn bench_refine(args: &Args) -> anyhow::Result<()> {
                 nearest_rows_with(&data, &queries, NnStrategy::Auto)
             })
         });
+        // As inside ZoomOut: the previous iteration's answer (here the
+        // same map at k - 5) as guesses.
+        let guess = pool.install(|| {
+            let kp = k - 5;
+            nearest_rows_with(
+                &data.columns(0, kp).into_owned(),
+                &queries.columns(0, kp).into_owned(),
+                NnStrategy::Auto,
+            )
+        });
+        let (t_hinted, i_hinted) = pool.install(|| {
+            time(args.bench.repeat, || {
+                nearest_rows_hinted(&data, &queries, &guess)
+            })
+        });
         let (dp, qp) = (
             work.join(format!("data{k}.npy")),
             work.join(format!("query{k}.npy")),
@@ -252,7 +268,8 @@ pub fn bench_refine(args: &Args) -> anyhow::Result<()> {
         save(&dp, &data)?;
         save(&qp, &queries)?;
         let mut peer = Vec::new();
-        let mut agree = i_tree == i_brute && i_prefix == i_brute && i_auto == i_brute;
+        let mut agree =
+            i_tree == i_brute && i_prefix == i_brute && i_auto == i_brute && i_hinted == i_brute;
         for method in ["sklearn-brute", "ckdtree"] {
             let out = work.join(format!("idx-{method}-{k}.npy"));
             let r = run(Command::new(&py)
@@ -270,14 +287,14 @@ pub fn bench_refine(args: &Args) -> anyhow::Result<()> {
             agree &= idx.iter().zip(&i_tree).all(|(&p, &o)| p as usize == o);
         }
         println!(
-            "{k:>4} {t_tree:>11.4} {t_brute:>11.4} {t_prefix:>12.4} {t_auto:>11.4} {:>13.4} {:>11.4} {:>8.1}x {:>8.1}x  {}",
+            "{k:>4} {t_tree:>11.4} {t_brute:>11.4} {t_prefix:>12.4} {t_auto:>11.4} {t_hinted:>13.4} {:>13.4} {:>11.4} {:>8.1}x {:>8.1}x  {}",
             peer[0],
             peer[1],
             peer[0] / t_auto,
             peer[1] / t_auto,
             if agree { "yes" } else { "NO" }
         );
-        nn_rows.push(json!({"k": k, "fmaps_tree": t_tree, "fmaps_brute": t_brute, "fmaps_prefix": t_prefix, "fmaps_auto": t_auto,
+        nn_rows.push(json!({"k": k, "fmaps_tree": t_tree, "fmaps_brute": t_brute, "fmaps_prefix": t_prefix, "fmaps_auto": t_auto, "fmaps_auto_guesses": t_hinted,
             "sklearn_brute": peer[0], "ckdtree": peer[1], "indices_agree": agree}));
     }
     if args.nn_only {

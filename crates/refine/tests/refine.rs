@@ -234,6 +234,12 @@ fn subsampled_zoomout_is_close_to_the_full_one() {
     };
     let out = z.refine(&c, &p.basis_a, &p.basis_b).unwrap();
     assert_eq!(out.t_ba.len(), p.b.vertices().len());
+    // The final map (searched with guesses from the samples) is the exact
+    // conversion of the final C.
+    assert_eq!(
+        out.t_ba,
+        point_map_from_fmap(&out.c_ab, &p.basis_a, &p.basis_b).unwrap()
+    );
     let e = error(&p, &out.t_ba);
     assert!(
         e < 0.5 * before && e < 2.0 * full + 0.02,
