@@ -7,10 +7,6 @@ use nalgebra::DMatrix;
 
 use crate::linalg::{gather_rhs, gram, point_map, pullback};
 use crate::{Error, Iteration, RefineReport, Refined, Refiner, Result, check_k, count_changed};
-use fmaps_solve::nearest_rows;
-
-/// Leading eigenvectors in which each vertex finds its nearest sample.
-const GUESS_DIM: usize = 16;
 
 /// Vertices of A and of B on which the ZoomOut iterations run (the paper's
 /// fast variant); typically a few thousand farthest points per shape
@@ -254,24 +250,9 @@ impl Refiner for ZoomOut {
             });
             prev = Some(t_ba);
         }
-        // The output: the final C converted on all vertices; on samples,
-        // each vertex of B guesses the image of its nearest sample (in the
-        // leading eigenvectors), which lets the search skip most rows.
-        let t_ba = if let Some(s) = sub {
-            let hint = prev.as_deref().map(|t| {
-                let kl = GUESS_DIM.min(basis_b.k());
-                let nearest = nearest_rows(
-                    &DMatrix::from_fn(s.b.len(), kl, |i, j| basis_b.eigenvectors[(s.b[i], j)]),
-                    &basis_b.eigenvectors.columns(0, kl).into_owned(),
-                );
-                nearest.iter().map(|&i| s.a[t[i]]).collect::<Vec<usize>>()
-            });
-            nn(
-                &c,
-                &basis_a.eigenvectors,
-                &basis_b.eigenvectors,
-                hint.as_deref(),
-            )
+        // The output: the final C converted on all vertices.
+        let t_ba = if sub.is_some() {
+            nn(&c, &basis_a.eigenvectors, &basis_b.eigenvectors, None)
         } else {
             nn(&c, &side_a.phi, &side_b.phi, prev.as_deref())
         };
