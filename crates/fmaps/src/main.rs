@@ -977,6 +977,11 @@ fn match_cmd(args: &MatchArgs) -> Result<(), Failure> {
         }
         None => Vec::new(),
     };
+    if args.restart_below.is_some() && params.starts.is_empty() {
+        return Err(input(anyhow::anyhow!(
+            "--restart-below needs further starts (--starts K1,K2, or --refine zoomout)"
+        )));
+    }
     params.restart_below = args.restart_below;
     params.k_process = params.k_process.max(params.refine.k_needed());
     let spinner = Spinner::new("matching");

@@ -355,6 +355,12 @@ fn match_writes_a_one_based_map_and_reports_stages() {
         .unwrap();
     assert_eq!(out.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&out.stderr).contains("--starts '6,x'"));
+    let out = fmaps()
+        .args(["match", &s(&mesh), &s(&mesh), "--restart-below", "0.5"])
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("--restart-below"));
     for bad in ["8:20", "0:20:1", "30:20:1", "8:20:x", "20:40:5"] {
         let out = fmaps()
             .args(["match", &s(&mesh), &s(&mesh), "--k", "12", "--zoomout", bad])
