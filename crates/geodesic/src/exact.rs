@@ -409,6 +409,14 @@ impl Apex {
         }
     }
 
+    /// The same face seen from another window on the same edge.
+    pub(crate) fn for_window(&self, w: &Window) -> Self {
+        Self {
+            xv: w.sx + (self.px - w.sx) * w.sy / (w.sy - self.py),
+            ..*self
+        }
+    }
+
     /// Distance from the window's (pseudo-)source to v3 in the unfolding.
     pub(crate) fn dist_from(&self, w: &Window) -> f64 {
         ((self.px - w.sx).powi(2) + (self.py - w.sy).powi(2)).sqrt()

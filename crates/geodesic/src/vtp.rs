@@ -378,7 +378,10 @@ impl<'a> Vtp<'a> {
         self.pending = pending;
         let mut batch = std::mem::take(&mut self.batch);
         batch.clear();
-        batch.extend(kept.iter().map(|w| (*w, Apex::new(t, w))));
+        if let Some(first) = kept.first() {
+            let apex = Apex::new(t, first);
+            batch.extend(kept.iter().map(|w| (*w, apex.for_window(w))));
+        }
         self.kept = kept;
         if batch.is_empty() {
             self.batch = batch;
@@ -428,10 +431,10 @@ impl<'a> Vtp<'a> {
             } else {
                 (a.xv, a.xv)
             };
-            for mut child in children(t, w, a, split).into_iter().flatten() {
-                if trim(t, &self.dist, &mut child) {
-                    self.append(child);
-                }
+            // Children are trimmed when their list is propagated, with the
+            // vertex distances of that later time.
+            for child in children(t, w, a, split).into_iter().flatten() {
+                self.append(child);
             }
         }
         self.batch = batch;
