@@ -307,12 +307,9 @@ impl<'a> Propagation<'a> {
             let d = w.sigma + apex.dist_from(&w);
             self.relax(apex.v3, d);
         }
-        for child in children(self.topo, &w, &apex, (apex.xv, apex.xv))
-            .into_iter()
-            .flatten()
-        {
-            self.add_window(child);
-        }
+        children(self.topo, &w, &apex, (apex.xv, apex.xv), |child| {
+            self.add_window(child)
+        });
     }
 }
 /// Trims a window to the part no endpoint vertex of its edge
@@ -423,16 +420,18 @@ impl Apex {
     }
 }
 
-/// The windows `w` lights on the two other edges of its face, in the frames
-/// of the faces beyond them (none across a boundary edge). Rays entering
+/// Emits the windows `w` lights on the two other edges of its face, in the
+/// frames of the faces beyond them (none across a boundary edge). Rays entering
 /// left of `split.0` may reach the left edge (from e0 to v3), rays entering
 /// right of `split.1` the right edge; `split = (xv, xv)` keeps every ray.
+#[inline]
 pub(crate) fn children(
     t: &Topology,
     w: &Window,
     apex: &Apex,
     split: (f64, f64),
-) -> [Option<Window>; 2] {
+    mut emit: impl FnMut(Window),
+) {
     let f = t.faces[w.face];
     let k = w.edge;
     let l = t.len[w.face];
@@ -455,8 +454,7 @@ pub(crate) fn children(
         ((k + 2) % 3, w.b0, w.b1.min(split.0), e1),
         ((k + 1) % 3, w.b0.max(split.1), w.b1, e0),
     ];
-    let mut out = [None, None];
-    for (slot, (exit, x_lo, x_hi, other)) in parts.into_iter().enumerate() {
+    for (exit, x_lo, x_hi, other) in parts {
         if !(x_hi > x_lo) {
             continue;
         }
@@ -500,7 +498,7 @@ pub(crate) fn children(
         }
         b0 = b0.clamp(0.0, lc);
         b1 = b1.clamp(0.0, lc);
-        out[slot] = Some(Window {
+        emit(Window {
             face: g,
             edge: j,
             b0,
@@ -510,7 +508,6 @@ pub(crate) fn children(
             sigma: w.sigma,
         });
     }
-    out
 }
 
 /// The window a pseudo-source at corner `k` of face `f`, at distance `d`,
@@ -572,13 +569,16 @@ impl TrimBuffers {
         pieces.clear();
         pieces.push(w);
         let (w_lo, w_hi) = (w.b0, w.b1);
-        let w_max = w.dist_at(w_lo).max(w.dist_at(w_hi));
+        let mut w_max = f64::NAN;
         for o in others {
             // Cheap rejections: no overlap, or `o` longer everywhere on it
             // than `w` anywhere (W is convex, so its maximum is at an end).
             let (lo, hi) = (w_lo.max(o.b0), w_hi.min(o.b1));
             if hi - lo <= 1e-12 * le {
                 continue;
+            }
+            if w_max.is_nan() {
+                w_max = w.dist_at(w_lo).max(w.dist_at(w_hi));
             }
             let o_min = if o.sx >= lo && o.sx <= hi {
                 o.sigma + o.sy

@@ -433,9 +433,7 @@ impl<'a> Vtp<'a> {
             };
             // Children are trimmed when their list is propagated, with the
             // vertex distances of that later time.
-            for child in children(t, w, a, split).into_iter().flatten() {
-                self.append(child);
-            }
+            children(t, w, a, split, |child| self.append(child));
         }
         self.batch = batch;
         self.d3s = d3s;
