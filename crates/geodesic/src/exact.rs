@@ -578,14 +578,14 @@ impl TrimBuffers {
                 continue;
             }
             if w_max.is_nan() {
-                w_max = w.dist_at(w_lo).max(w.dist_at(w_hi));
+                w_max = w.dist_at(w_lo).max(w.dist_at(w_hi)) * (1.0 + 4.0 * SLACK) + SLACK * le;
             }
             let o_min = if o.sx >= lo && o.sx <= hi {
                 o.sigma + o.sy
             } else {
                 o.dist_at(lo).min(o.dist_at(hi))
             };
-            if o_min > w_max * (1.0 + 4.0 * SLACK) + SLACK * le {
+            if o_min > w_max {
                 continue;
             }
             next.clear();

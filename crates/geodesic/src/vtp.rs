@@ -43,7 +43,7 @@ pub(crate) struct Vtp<'a> {
     dir: Vec<f64>,
     any_dir: Vec<bool>,
     emitted_everywhere: Vec<bool>,
-    d3s: Vec<(f64, f64)>,
+    d3s: Vec<(f64, f64, f64)>,
     pub dist: Vec<f64>,
     state: Vec<u8>,
     /// Distance at which each vertex last cast its pseudo-source windows.
@@ -61,8 +61,6 @@ pub(crate) struct Vtp<'a> {
     /// Settled pseudo-source vertices whose distance dropped: they cast
     /// their windows again.
     recast: Vec<usize>,
-    batch: Vec<(Window, Apex)>,
-    pending: Vec<Window>,
     kept: Vec<Window>,
     keyed: Vec<(f64, Window)>,
     bufs: TrimBuffers,
@@ -91,8 +89,6 @@ impl<'a> Vtp<'a> {
             fifo: VecDeque::new(),
             best_top: vec![(f64::INFINITY, 0.0); slots],
             recast: Vec::new(),
-            batch: Vec::new(),
-            pending: Vec::new(),
             kept: Vec::new(),
             keyed: Vec::new(),
             bufs: TrimBuffers::default(),
@@ -346,8 +342,10 @@ impl<'a> Vtp<'a> {
     /// Propagates every window of a slot's list across its face.
     fn propagate_list(&mut self, slot: usize) {
         let t = self.topo;
-        let mut pending = std::mem::take(&mut self.pending);
-        pending.clear();
+        // Pending windows, trimmed by the vertices, keyed by their nearest
+        // distance.
+        let mut keyed = std::mem::take(&mut self.keyed);
+        keyed.clear();
         let mut id = std::mem::replace(&mut self.head[slot], NIL);
         while id != NIL {
             let Node { mut w, next } = self.nodes[id as usize];
@@ -355,45 +353,36 @@ impl<'a> Vtp<'a> {
             self.free = id;
             id = next;
             if trim(t, &self.dist, &mut w) {
-                pending.push(w);
+                keyed.push((w.min_dist(), w));
             }
         }
         // Nearest first, each window trimmed against those kept before it.
         let le = t.len[slot / 3][slot % 3];
         let mut kept = std::mem::take(&mut self.kept);
         kept.clear();
-        if pending.len() > 1 {
-            let mut keyed = std::mem::take(&mut self.keyed);
-            keyed.clear();
-            keyed.extend(pending.iter().map(|w| (w.min_dist(), *w)));
+        if keyed.len() > 1 {
             keyed.sort_unstable_by(|a, b| a.0.total_cmp(&b.0));
             for &(_, w) in &keyed {
                 self.bufs.trim(w, kept.iter(), le);
                 kept.extend_from_slice(&self.bufs.pieces);
             }
-            self.keyed = keyed;
         } else {
-            kept.extend_from_slice(&pending);
+            kept.extend(keyed.iter().map(|&(_, w)| w));
         }
-        self.pending = pending;
-        let mut batch = std::mem::take(&mut self.batch);
-        batch.clear();
-        if let Some(first) = kept.first() {
-            let apex = Apex::new(t, first);
-            batch.extend(kept.iter().map(|w| (*w, apex.for_window(w))));
-        }
-        self.kept = kept;
-        if batch.is_empty() {
-            self.batch = batch;
+        self.keyed = keyed;
+        let Some(first) = kept.first() else {
+            self.kept = kept;
             return;
-        }
+        };
+        let base = Apex::new(t, first);
         // The shortest path to the far vertex v3 through this edge: a ray
         // of a window when v3 is in its light, else bent at the window's
         // nearer end (a longer but real path).
         let (mut best, mut best_x) = self.best_top[slot];
         let mut d3s = std::mem::take(&mut self.d3s);
         d3s.clear();
-        for (w, a) in &batch {
+        for w in &kept {
+            let a = base.for_window(w);
             let c = a.xv.clamp(w.b0, w.b1);
             let d3 = if c == a.xv {
                 w.sigma + a.dist_from(w)
@@ -403,16 +392,16 @@ impl<'a> Vtp<'a> {
             if d3 < best {
                 (best, best_x) = (d3, c);
             }
-            d3s.push((d3, c));
+            d3s.push((d3, c, a.xv));
         }
         self.best_top[slot] = (best, best_x);
         // v3 gets the shortest of these paths, with the direction it
         // arrives from (towards the source, or towards the bend).
-        let v3 = batch[0].1.v3;
-        for ((w, a), &(d3, c)) in batch.iter().zip(&d3s) {
+        let v3 = base.v3;
+        for (w, &(d3, c, xv)) in kept.iter().zip(&d3s) {
             if d3 <= best * (1.0 + 1e-12) && d3 < self.dist[v3] * (1.0 + 1e-12) {
-                let target = if c == a.xv { (w.sx, w.sy) } else { (c, 0.0) };
-                let dir = self.fans.direction(slot, a, target);
+                let target = if c == xv { (w.sx, w.sy) } else { (c, 0.0) };
+                let dir = self.fans.direction(slot, &base, target);
                 self.relax(v3, d3, dir);
             }
         }
@@ -424,8 +413,10 @@ impl<'a> Vtp<'a> {
         // is then no geodesic beyond p (the shorter path would have to bend
         // at p). So the left child keeps only rays entering left of best_x,
         // the right child only those right of it. Near-ties keep both.
-        for ((w, a), &(d3, _)) in batch.iter().zip(&d3s) {
+        for (w, &(d3, _, xv)) in kept.iter().zip(&d3s) {
             self.stats.propagated += 1;
+            let a = Apex { xv, ..base };
+            let a = &a;
             let split = if best < d3 - SLACK * (d3 + a.le) {
                 (a.xv.min(best_x), a.xv.max(best_x))
             } else {
@@ -435,7 +426,7 @@ impl<'a> Vtp<'a> {
             // vertex distances of that later time.
             children(t, w, a, split, |child| self.append(child));
         }
-        self.batch = batch;
+        self.kept = kept;
         self.d3s = d3s;
     }
 }
