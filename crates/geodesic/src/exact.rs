@@ -458,7 +458,7 @@ pub(crate) fn children(
         if !(x_hi > x_lo) {
             continue;
         }
-        let Some((g, j)) = t.adj[w.face][exit] else {
+        let Some((g, j)) = t.adj(w.face, exit) else {
             continue;
         };
         // Edge j of g runs from A to B, both on the exit edge.
@@ -514,7 +514,7 @@ pub(crate) fn children(
 /// casts on the opposite edge, in the frame of the face beyond (none when
 /// that edge is on the boundary).
 pub(crate) fn spoke_window(t: &Topology, f: usize, k: usize, d: f64) -> Option<Window> {
-    let (g, j) = t.adj[f][k]?;
+    let (g, j) = t.adj(f, k)?;
     let l = t.len[f];
     let b = t.faces[f][(k + 2) % 3];
     // v in the frame of edge j of g: x from that edge's start vertex (b for

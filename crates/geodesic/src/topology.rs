@@ -12,8 +12,10 @@ pub(crate) struct Topology {
     pub faces: Vec<[usize; 3]>,
     /// `len[f][k]`: length of edge k of face f.
     pub len: Vec<[f64; 3]>,
-    /// `adj[f][k]`: the face across edge k and that edge's index there.
-    pub adj: Vec<[Option<(usize, usize)>; 3]>,
+    /// Per face and edge k: `3 g + j` for the face g across edge k and
+    /// that edge's index j there, `u32::MAX` on the boundary (compact: the
+    /// exact propagation reads it for every window).
+    across: Vec<[u32; 3]>,
     /// Faces around each vertex, with the vertex's corner index in each.
     pub ring: Vec<Vec<(usize, usize)>>,
     /// Geodesics can bend at saddle (angle sum > 2π) and boundary vertices.
@@ -82,14 +84,27 @@ impl Topology {
                 }
             }
         }
+        let across = adj
+            .iter()
+            .map(|a| a.map(|x| x.map_or(u32::MAX, |(g, j)| (3 * g + j) as u32)))
+            .collect();
         Ok(Self {
             faces,
             len,
-            adj,
+            across,
             ring,
             pseudo_source,
             neighbours,
         })
+    }
+}
+
+impl Topology {
+    /// The face across edge `k` of face `f`, and that edge's index there.
+    #[inline]
+    pub(crate) fn adj(&self, f: usize, k: usize) -> Option<(usize, usize)> {
+        let c = self.across[f][k];
+        (c != u32::MAX).then_some((c as usize / 3, c as usize % 3))
     }
 }
 

@@ -136,7 +136,7 @@ impl<'a> Vtp<'a> {
             self.enqueue(3 * f + (kv + 2) % 3);
             // The edge opposite v, both ways, once the face beyond it is
             // reached.
-            if let Some((g, j)) = t.adj[f][kv]
+            if let Some((g, j)) = t.adj(f, kv)
                 && self.state[t.faces[g][j]] != OUTSIDE
             {
                 self.enqueue(3 * f + kv);
@@ -497,7 +497,7 @@ impl Fans {
                     t.faces[f][(k + 1) % 3]
                 };
                 // Across the edge (v, second): opposite `first`.
-                let Some((g, _)) = t.adj[f][corner_of(t.faces[f], first)] else {
+                let Some((g, _)) = t.adj(f, corner_of(t.faces[f], first)) else {
                     break false;
                 };
                 if g == f0 {
