@@ -314,7 +314,7 @@ fn noisy_sphere() -> TriMesh {
 }
 
 /// The two exact schemes share only the window geometry: their
-/// scheduling and pruning (vertex queue, list pruning, saddle shadows
+/// scheduling and pruning (vertex queue, one angle two sides, saddle shadows
 /// versus window order and trimming against every accepted window)
 /// differ, so agreement to rounding on meshes with many saddles, a
 /// boundary, a reflex corner and several sources checks both.
