@@ -391,10 +391,16 @@ impl<'a> Vtp<'a> {
         // v3 gets the shortest of these paths, with the direction it
         // arrives from (towards the source, or towards the bend).
         let v3 = base.v3;
+        // Directions matter only where windows are cast: interior saddles.
+        let directed = t.pseudo_source[v3] && self.fans.ordered[v3];
         for (w, &(d3, c, xv)) in kept.iter().zip(&d3s) {
             if d3 <= best * (1.0 + 1e-12) && d3 < self.dist[v3] * (1.0 + 1e-12) {
-                let target = if c == xv { (w.sx, w.sy) } else { (c, 0.0) };
-                let dir = self.fans.direction(slot, &base, target);
+                let dir = if directed {
+                    let target = if c == xv { (w.sx, w.sy) } else { (c, 0.0) };
+                    self.fans.direction(slot, &base, target)
+                } else {
+                    0.0
+                };
                 self.relax(v3, d3, dir);
             }
         }
