@@ -71,6 +71,11 @@ pub(crate) struct Vtp<'a> {
     /// their windows again.
     recast: Vec<usize>,
     kept: Vec<Window>,
+    /// Early stop: per slot the nearest distance of its pending windows,
+    /// and a heap of (minimum, slot) with stale entries.
+    track: bool,
+    slot_min: Vec<f64>,
+    pending: BinaryHeap<Item>,
     pub stats: ExactStats,
 }
 
@@ -97,12 +102,28 @@ impl<'a> Vtp<'a> {
             best_top: vec![(f64::INFINITY, 0.0); slots],
             recast: Vec::new(),
             kept: Vec::new(),
+            track: false,
+            slot_min: Vec::new(),
+            pending: BinaryHeap::new(),
             stats: ExactStats::default(),
         }
     }
 
     /// Propagates from `sources` over the whole mesh.
-    pub(crate) fn run(&mut self, sources: &[usize]) {
+    /// Propagates from `sources` over the whole mesh, or until every vertex
+    /// of `targets` (when given) is final.
+    ///
+    /// Early stop: every later distance descends from a pending window (and
+    /// is at least that window's nearest distance) or from a vertex still
+    /// in the queue (at least its key), so a target whose distance is at
+    /// most the smallest of those is final. The pending windows' minima are
+    /// tracked per slot in a second, lazily cleaned heap, only when
+    /// targets are given.
+    pub(crate) fn run(&mut self, sources: &[usize], targets: Option<&[usize]>) {
+        self.track = targets.is_some();
+        if self.track {
+            self.slot_min = vec![f64::INFINITY; self.head.len()];
+        }
         for &s in sources {
             self.dist[s] = 0.0;
         }
@@ -112,7 +133,16 @@ impl<'a> Vtp<'a> {
             }
         }
         self.drain();
-        while let Some(item) = self.heap.pop() {
+        loop {
+            if let Some(t) = targets {
+                let bound = self.lower_bound();
+                if t.iter().all(|&v| self.dist[v] <= bound) {
+                    break;
+                }
+            }
+            let Some(item) = self.heap.pop() else {
+                break;
+            };
             let v = item.code as usize;
             if self.state[v] == INSIDE || item.key > self.dist[v] {
                 continue;
@@ -120,6 +150,28 @@ impl<'a> Vtp<'a> {
             self.settle(v, false);
             self.drain();
         }
+    }
+
+    /// A lower bound of every distance still to be found (tracking on).
+    fn lower_bound(&mut self) -> f64 {
+        while let Some(top) = self.heap.peek() {
+            let v = top.code as usize;
+            if self.state[v] == INSIDE || top.key > self.dist[v] {
+                self.heap.pop();
+            } else {
+                break;
+            }
+        }
+        while let Some(top) = self.pending.peek() {
+            if top.key != self.slot_min[top.code as usize] {
+                self.pending.pop();
+            } else {
+                break;
+            }
+        }
+        let a = self.heap.peek().map_or(f64::INFINITY, |i| i.key);
+        let b = self.pending.peek().map_or(f64::INFINITY, |i| i.key);
+        a.min(b)
     }
 
     /// Marks `v` settled, casts its windows if it is a source or a
@@ -318,6 +370,16 @@ impl<'a> Vtp<'a> {
         };
         self.head[slot] = id;
         self.stats.windows += 1;
+        if self.track {
+            let m = w.min_dist();
+            if m < self.slot_min[slot] {
+                self.slot_min[slot] = m;
+                self.pending.push(Item {
+                    key: m,
+                    code: slot as u64,
+                });
+            }
+        }
         let f = self.topo.faces[w.face];
         if self.state[f[(w.edge + 1) % 3]] == INSIDE || self.state[f[(w.edge + 2) % 3]] == INSIDE {
             self.enqueue(slot);
@@ -353,6 +415,9 @@ impl<'a> Vtp<'a> {
         // their shadows only.)
         let mut kept = std::mem::take(&mut self.kept);
         kept.clear();
+        if self.track {
+            self.slot_min[slot] = f64::INFINITY;
+        }
         let mut id = std::mem::replace(&mut self.head[slot], NIL);
         while id != NIL {
             let Node { mut w, next } = self.nodes[id as usize];
