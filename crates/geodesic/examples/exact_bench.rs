@@ -23,8 +23,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         }
     }
     println!(
-        "{:<14} {:>6} {:>4} {:>10} {:>10} {:>10} {:>10}",
-        "mesh", "n", "src", "ms/src", "windows", "propag", "max rel"
+        "{:<14} {:>6} {:>4} {:>10} {:>10} {:>10} {:>10} {:>10}",
+        "mesh", "n", "src", "ms/src", "windows", "propag", "stored", "max rel"
     );
     for path in &meshes {
         let mesh = fmaps_mesh_io::read_mesh(path)?;
@@ -35,6 +35,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             .map(|s| s.to_string_lossy().into_owned())
             .unwrap_or_default();
         let (mut secs, mut windows, mut propagated, mut worst) = (0.0, 0u64, 0u64, 0.0f64);
+        let mut stored = 0;
         for i in 0..n_src {
             let s = i * n / n_src;
             let t = Instant::now();
@@ -42,6 +43,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             secs += t.elapsed().as_secs_f64();
             windows += st.windows;
             propagated += st.propagated;
+            stored = stored.max(st.peak_stored);
             let file = |dir: &str| format!("{dir}/{stem}-{s}.txt");
             if let Some(dir) = &save {
                 std::fs::create_dir_all(dir)?;
@@ -65,13 +67,14 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             }
         }
         println!(
-            "{:<14} {:>6} {:>4} {:>10.2} {:>10} {:>10} {:>10.2e}",
+            "{:<14} {:>6} {:>4} {:>10.2} {:>10} {:>10} {:>10} {:>10.2e}",
             stem,
             n,
             n_src,
             1e3 * secs / n_src as f64,
             windows / n_src as u64,
             propagated / n_src as u64,
+            stored,
             worst
         );
     }

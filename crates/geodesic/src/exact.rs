@@ -86,6 +86,9 @@ pub struct ExactStats {
     pub propagated: u64,
     /// Largest size of the event queue.
     pub peak_queue: usize,
+    /// Largest number of windows held in memory at once (the window-ordered
+    /// scheme keeps every accepted window; VTP only the pending ones).
+    pub peak_stored: usize,
 }
 
 pub(crate) struct Propagation<'a> {
@@ -218,6 +221,7 @@ impl<'a> Propagation<'a> {
     fn push_window(&mut self, w: Window) {
         let id = self.arena.len();
         self.arena.push(w);
+        self.stats.peak_stored = self.arena.len();
         self.slots[3 * w.face + w.edge].push(id as u32);
         self.heap.push(Item {
             key: w.min_dist(),

@@ -15,9 +15,11 @@
 //!
 //! All implement [`DistanceSolver`]; unreachable vertices (another
 //! connected component) get `f64::INFINITY`, never NaN. Per source, memory
-//! is O(n) for Dijkstra and the heat method, and O(n + windows) for the exact
-//! solver (about 20 windows per vertex, 6 MB on a 5k-vertex FAUST mesh);
-//! [`DistanceSolver::fields`] runs many sources in parallel (rayon).
+//! is O(n) for Dijkstra and the heat method, and O(n + pending windows)
+//! for the exact solver (VTP holds at most 2-3.5k windows of 56 bytes at
+//! once on 5k-vertex FAUST and TOSCA meshes; the window-ordered reference
+//! keeps every window, 110-170k); [`DistanceSolver::fields`] runs many
+//! sources in parallel (rayon).
 //!
 //! ```
 //! use fmaps_geodesic::{DistanceSolver, ExactSolver};

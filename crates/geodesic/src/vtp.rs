@@ -366,6 +366,7 @@ impl<'a> Vtp<'a> {
             id
         } else {
             self.nodes.push(node);
+            self.stats.peak_stored = self.nodes.len();
             (self.nodes.len() - 1) as u32
         };
         self.head[slot] = id;
