@@ -100,19 +100,24 @@ pub fn pictures(args: &Args) -> anyhow::Result<()> {
         let out = out_root.join(cname);
         std::fs::create_dir_all(&out)?;
         let (ma, mb) = (c.read_mesh(&a)?, c.read_mesh(&b)?);
+        // The eval methods of the same names: fmaps-init is the default
+        // pipeline without refinement, fmaps-zoomout ZoomOut 50:150:5 from
+        // the default starts.
         let params = MatchParams {
             refine: Refinement::zoomout(50, 150, 5),
+            starts: fmaps::pipeline::ZOOMOUT_STARTS.to_vec(),
             ..MatchParams::default()
         };
         let (pa, pb) = (prepare(&ma, &params)?, prepare(&mb, &params)?);
         let r = match_prepared(&pa, &pb, &params)?;
+        let r_init = match_prepared(&pa, &pb, &MatchParams::default())?;
         let gt = c.ground_truth(&a, &b, ma.n_vertices(), mb.n_vertices())?;
         let gt_source = fmaps::mesh_io::read_vts(c.vts_path(&a, false))?;
         let solver = ExactSolver::new(&mb)?;
         let eval = |t: &[usize]| -> anyhow::Result<MapReport> {
             Ok(evaluate(&mb, &solver, t, &gt, None, &ep)?)
         };
-        let (init, refined) = (eval(&r.t_ab_init)?, eval(&r.t_ab)?);
+        let (init, refined) = (eval(&r_init.t_ab)?, eval(&r.t_ab)?);
         let view = view_of(cname);
         let mut written = Vec::new();
         let mut save = |img: &Image, name: &str| -> anyhow::Result<()> {
@@ -122,7 +127,7 @@ pub fn pictures(args: &Args) -> anyhow::Result<()> {
             Ok(())
         };
         let maps: [(&str, &[usize]); 2] =
-            [("fmaps-init", &r.t_ab_init), ("fmaps-zoomout", &r.t_ab)];
+            [("fmaps-init", &r_init.t_ab), ("fmaps-zoomout", &r.t_ab)];
         let colors = viz::position_colors(ma.vertices());
         save(
             &transfer_row(&ma, &mb, &colors, &maps, &view)?,
