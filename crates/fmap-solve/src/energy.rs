@@ -28,7 +28,8 @@
 //! eigenvectors. The minimum is then over the remaining columns.
 
 use faer::linalg::matmul::matmul;
-use faer::{Accum, Mat, MatRef, Par, Side};
+use faer::reborrow::{Reborrow, ReborrowMut};
+use faer::{Accum, Mat, MatRef, Par};
 use nalgebra::{DMatrix, DVector};
 use rayon::prelude::*;
 
@@ -236,24 +237,29 @@ impl FmapEnergy {
         if self.op_terms().next().is_none() {
             return self.minimize_rows(ka, kb, &aat, &bat);
         }
-        // vec(C) is column-major: index (i, j) -> i + kb * j.
+        // vec(C) is column-major: index (i, j) -> i + kb * j. Only the
+        // lower triangle of H is formed (the factorization reads no more).
         let m = ka * kb;
-        let mut h = Mat::<f64>::zeros(m, m);
-        // w_descr (A Aᵀ ⊗ I) + w_lap diag(vec mask).
-        for l in 0..ka {
-            for j in 0..ka {
-                let v = self.w_descr * aat[(j, l)];
-                for i in 0..kb {
-                    h[(i + kb * j, i + kb * l)] += v;
+        let build = |h: &mut Mat<f64>| {
+            h.fill(0.0);
+            // w_descr (A Aᵀ ⊗ I) + w_lap diag(vec mask).
+            for l in 0..ka {
+                for j in l..ka {
+                    let v = self.w_descr * aat[(j, l)];
+                    for i in 0..kb {
+                        h[(i + kb * j, i + kb * l)] += v;
+                    }
                 }
             }
-        }
-        for j in 0..ka {
-            for i in 0..kb {
-                h[(i + kb * j, i + kb * j)] += self.w_lap * self.lap_mask[(i, j)];
+            for j in 0..ka {
+                for i in 0..kb {
+                    h[(i + kb * j, i + kb * j)] += self.w_lap * self.lap_mask[(i, j)];
+                }
             }
-        }
-        self.add_operator_hessian(&mut h, ka, kb);
+            self.add_operator_hessian(h, ka, kb);
+        };
+        let mut h = Mat::<f64>::zeros(m, m);
+        build(&mut h);
         let mut rhs: Vec<f64> = (0..m)
             .map(|t| self.w_descr * bat[(t % kb, t / kb)])
             .collect();
@@ -264,10 +270,7 @@ impl FmapEnergy {
                 rhs[t] -= s;
             }
         }
-        let x = solve_spd(
-            h.as_mut().submatrix_mut(free, free, m - free, m - free),
-            &rhs[free..],
-        )?;
+        let x = solve_spd(&mut h, free, &rhs[free..], build)?;
         let mut c = DMatrix::zeros(kb, ka);
         if let Some(c0) = &self.fixed_first_column {
             c.column_mut(0).copy_from(c0);
@@ -287,10 +290,14 @@ impl FmapEnergy {
         let nf = ka - j0;
         let mut c = DMatrix::zeros(kb, ka);
         for i in 0..kb {
-            let mut h = Mat::<f64>::from_fn(nf, nf, |r, s| self.w_descr * aat[(r + j0, s + j0)]);
-            for j in 0..nf {
-                h[(j, j)] += self.w_lap * self.lap_mask[(i, j + j0)];
-            }
+            let build = |h: &mut Mat<f64>| {
+                *h = Mat::<f64>::from_fn(nf, nf, |r, s| self.w_descr * aat[(r + j0, s + j0)]);
+                for j in 0..nf {
+                    h[(j, j)] += self.w_lap * self.lap_mask[(i, j + j0)];
+                }
+            };
+            let mut h = Mat::<f64>::zeros(nf, nf);
+            build(&mut h);
             let mut rhs: Vec<f64> = (0..nf).map(|j| self.w_descr * bat[(i, j + j0)]).collect();
             if let Some(c0) = &self.fixed_first_column {
                 c[(i, 0)] = c0[i];
@@ -298,7 +305,7 @@ impl FmapEnergy {
                     *r -= self.w_descr * aat[(j + j0, 0)] * c0[i];
                 }
             }
-            let row = solve_spd(h.as_mut(), &rhs)?;
+            let row = solve_spd(&mut h, 0, &rhs, build)?;
             for (j, v) in row.into_iter().enumerate() {
                 c[(i, j + j0)] = v;
             }
@@ -360,37 +367,31 @@ impl FmapEnergy {
         // along columns.
         let mut rt = Mat::<f64>::zeros(kb * kb, ka * ka);
         matmul(rt.as_mut(), Accum::Replace, yv, xv.transpose(), 1.0, par);
-        // Columns are independent: fill them in parallel into a dense
-        // column-major buffer, then add it to H.
-        let m = ka * kb;
-        let mut buf = vec![0.0; m * m];
-        buf.par_chunks_mut(m).enumerate().for_each(|(col, out)| {
+        // Columns are independent: add them to H in parallel, rows on and
+        // below the diagonal only.
+        h.par_col_iter_mut().enumerate().for_each(|(col, mut out)| {
             let (r, l) = (col % kb, col / kb);
-            for j in 0..ka {
+            for j in l..ka {
                 let (jl, lj) = (j + ka * l, l + ka * j);
-                let x_jl = xxt[(j, l)];
                 let (c_jl, c_lj) = (rt.col_as_slice(jl), rt.col_as_slice(lj));
-                let dst = &mut out[kb * j..kb * (j + 1)];
-                for (i, o) in dst.iter_mut().enumerate() {
-                    *o = -c_jl[i + kb * r] - c_lj[r + kb * i];
+                let i0 = if j == l { r } else { 0 };
+                for i in i0..kb {
+                    out[i + kb * j] -= c_jl[i + kb * r] + c_lj[r + kb * i];
                 }
-                dst[r] += x_jl;
+                out[r + kb * j] += xxt[(j, l)];
                 if j == l {
-                    for (i, o) in dst.iter_mut().enumerate() {
-                        *o += yty[(i, r)];
+                    for i in i0..kb {
+                        out[i + kb * j] += yty[(i, r)];
                     }
                 }
             }
         });
-        for (col, src) in buf.chunks(m).enumerate() {
-            for (row, v) in src.iter().enumerate() {
-                h[(row, col)] += v;
-            }
-        }
     }
 }
 
-/// Solves H x = b for symmetric positive semidefinite H (faer Cholesky).
+/// Solves `H[s.., s..] x = b` for symmetric positive semidefinite H, of
+/// which only the lower triangle is read; factors in place (faer's blocked
+/// Cholesky, no copy), so `rebuild` must restore H for a retry.
 ///
 /// Symmetric shapes (repeated eigenvalues with descriptors invariant
 /// under the symmetry) make the energy flat along some directions: every
@@ -398,29 +399,55 @@ impl FmapEnergy {
 /// largest diagonal entry picks one (the nearly minimum-norm one) at no
 /// measurable cost in energy; if the factorization still fails the ridge
 /// grows by 100x, up to 1e-5. An all-zero H is an error.
-fn solve_spd(mut h: faer::MatMut<'_, f64>, b: &[f64]) -> Result<Vec<f64>> {
-    let n = h.nrows();
+fn solve_spd(
+    h: &mut Mat<f64>,
+    s: usize,
+    b: &[f64],
+    rebuild: impl Fn(&mut Mat<f64>),
+) -> Result<Vec<f64>> {
+    use faer::dyn_stack::{MemBuffer, MemStack};
+    use faer::linalg::cholesky::llt::factor;
+    use faer::linalg::triangular_solve;
+    let n = h.nrows() - s;
     if n == 0 {
         return Ok(Vec::new());
     }
-    let max_diag = (0..n).fold(0.0f64, |m, i| m.max(h[(i, i)]));
+    let max_diag = (s..s + n).fold(0.0f64, |m, i| m.max(h[(i, i)]));
     if !(max_diag > 0.0 && max_diag.is_finite()) {
         return Err(Error::NotPositiveDefinite);
     }
-    use faer::linalg::solvers::SolveCore;
-    // The factorization works on its own copy: the ridge is added to H in
-    // place, each retry adding the difference.
+    let par = faer::get_global_parallelism();
+    let mut mem = MemBuffer::new(factor::cholesky_in_place_scratch::<f64>(
+        n,
+        par,
+        Default::default(),
+    ));
     let mut ridge = 1e-13;
-    let mut added = 0.0;
+    let mut first = true;
     while ridge <= 1e-5 {
-        for i in 0..n {
-            h[(i, i)] += (ridge - added) * max_diag;
+        if !first {
+            rebuild(h);
         }
-        added = ridge;
-        if let Ok(llt) = h.as_ref().llt(Side::Lower) {
+        first = false;
+        let mut a = h.as_mut().submatrix_mut(s, s, n, n);
+        for i in 0..n {
+            a[(i, i)] += ridge * max_diag;
+        }
+        let ok = factor::cholesky_in_place(
+            a.rb_mut(),
+            Default::default(),
+            par,
+            MemStack::new(&mut mem),
+            Default::default(),
+        )
+        .is_ok();
+        if ok {
+            // L Lᵀ x = b.
             let mut x = b.to_vec();
-            let xm = faer::MatMut::from_column_major_slice_mut(&mut x, n, 1);
-            llt.solve_in_place_with_conj(faer::Conj::No, xm);
+            let mut xm = faer::MatMut::from_column_major_slice_mut(&mut x, n, 1);
+            let l = a.rb();
+            triangular_solve::solve_lower_triangular_in_place(l, xm.rb_mut(), par);
+            triangular_solve::solve_upper_triangular_in_place(l.transpose(), xm.rb_mut(), par);
             if x.iter().all(|v| v.is_finite()) {
                 return Ok(x);
             }
@@ -428,4 +455,60 @@ fn solve_spd(mut h: faer::MatMut<'_, f64>, b: &[f64]) -> Result<Vec<f64>> {
         ridge *= 100.0;
     }
     Err(Error::NotPositiveDefinite)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A PSD matrix made slightly indefinite by rounding-level noise: the
+    /// first ridge (1e-13 of the largest diagonal) cannot factor it, so
+    /// the in-place factorization fails, H is rebuilt and the next ridge
+    /// (1e-11) solves the regularized system; the lower triangle alone is
+    /// read (the upper one holds garbage).
+    #[test]
+    fn solve_spd_retries_on_a_rebuilt_matrix() {
+        let n = 6;
+        let v: Vec<f64> = (0..n).map(|i| 1.0 + i as f64).collect();
+        let build = |h: &mut Mat<f64>| {
+            for j in 0..n {
+                for i in 0..n {
+                    h[(i, j)] = if i >= j {
+                        v[i] * v[j] - if i == j { 1e-12 * 36.0 } else { 0.0 }
+                    } else {
+                        f64::NAN
+                    };
+                }
+            }
+        };
+        let mut h = Mat::<f64>::zeros(n, n);
+        build(&mut h);
+        let rebuilt = std::cell::Cell::new(0);
+        let b: Vec<f64> = (0..n).map(|i| (i as f64).sin()).collect();
+        let x = solve_spd(&mut h, 0, &b, |h| {
+            rebuilt.set(rebuilt.get() + 1);
+            build(h)
+        })
+        .unwrap();
+        assert_eq!(rebuilt.get(), 1);
+        // (v vᵀ − 1e-12·36 I + 1e-11·36 I) x = b, to backward-stable
+        // accuracy (the system has condition ~1e11).
+        let vx: f64 = v.iter().zip(&x).map(|(a, b)| a * b).sum();
+        let x_max = x.iter().fold(0.0f64, |m, y| m.max(y.abs()));
+        for i in 0..n {
+            let hx = v[i] * vx + (1e-11 - 1e-12) * 36.0 * x[i];
+            assert!(
+                (hx - b[i]).abs() <= 1e-12 * (91.0 * x_max + 1.0),
+                "{hx} vs {}",
+                b[i]
+            );
+        }
+        // A block below the fixed part: only H[s.., s..] is factored.
+        let mut g = Mat::<f64>::identity(4, 4);
+        g[(0, 0)] = f64::NAN;
+        let y = solve_spd(&mut g, 1, &[1.0, 2.0, 3.0], |_| unreachable!()).unwrap();
+        for (a, e) in y.iter().zip([1.0, 2.0, 3.0]) {
+            assert!((a - e).abs() < 1e-9);
+        }
+    }
 }
