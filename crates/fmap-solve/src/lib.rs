@@ -42,7 +42,10 @@ use nalgebra::DMatrix;
 pub use energy::{
     FmapEnergy, OperatorPairs, laplacian_mask, multiplication_operator, resolvent_mask,
 };
-pub use nn::{NnStrategy, PREFIX_DIM, nearest_rows, nearest_rows_hinted, nearest_rows_with};
+pub use nn::{
+    NnStrategy, PREFIX_DIM, PREFIX_MIN, nearest_rows, nearest_rows_hinted,
+    nearest_rows_hinted_with, nearest_rows_with,
+};
 pub use operators::{multiplication_operators, orientation_operators};
 pub use types::{FunctionalMap, PointMap};
 pub use weights::{

@@ -77,6 +77,7 @@ pub enum NnStrategy {
     /// clusters that the triangle inequality cannot rule out.
     Tree,
     /// Every pair is ranked on the leading [`PREFIX_DIM`] coordinates only
+    /// (half of them below 64 dimensions)
     /// (f32 GEMM of that width); a query's full f64 distance is computed
     /// only for the rows whose partial distance does not already exceed an
     /// upper bound of its nearest distance (the best-ranked row's, or the
@@ -86,8 +87,23 @@ pub enum NnStrategy {
     Prefix,
 }
 
-/// Leading coordinates on which [`NnStrategy::Prefix`] ranks every pair.
+/// Leading coordinates on which [`NnStrategy::Prefix`] ranks every pair
+/// from 64 dimensions on (below, half of the coordinates, at least
+/// [`PREFIX_MIN`]).
 pub const PREFIX_DIM: usize = 40;
+
+/// Smallest prefix width; the prefix search needs at least twice as many
+/// dimensions.
+pub const PREFIX_MIN: usize = 8;
+
+/// The prefix width used in dimension `d`.
+fn prefix_width(d: usize) -> usize {
+    if d >= PREFIX_FROM {
+        PREFIX_DIM
+    } else {
+        (d / 2).max(PREFIX_MIN)
+    }
+}
 
 /// For every row of `queries` (n_q x d), the index of the nearest row of
 /// `data` (n_x x d); [`NnStrategy::Auto`]. Panics if the dimensions differ
@@ -126,6 +142,26 @@ pub fn nearest_rows_hinted(
         "nearest_rows_hinted: one hint per query"
     );
     search(data, queries, NnStrategy::Auto, Some(hint))
+}
+
+/// [`nearest_rows_hinted`] with a chosen strategy. A caller that knows its
+/// guesses are good at every step (ICP, whose map changes little per
+/// iteration) can ask for [`NnStrategy::Prefix`] below the dimension where
+/// `Auto` starts using it (64): it then ranks on the leading half of the
+/// coordinates. Same exact answer whatever the strategy.
+#[track_caller]
+pub fn nearest_rows_hinted_with(
+    data: &DMatrix<f64>,
+    queries: &DMatrix<f64>,
+    hint: &[usize],
+    strategy: NnStrategy,
+) -> Vec<usize> {
+    assert_eq!(
+        hint.len(),
+        queries.nrows(),
+        "nearest_rows_hinted_with: one hint per query"
+    );
+    search(data, queries, strategy, Some(hint))
 }
 
 #[track_caller]
@@ -173,7 +209,7 @@ fn search(
     };
     match strategy {
         NnStrategy::Tree if d > 0 => return tree_search(data, queries),
-        NnStrategy::Prefix if d > PREFIX_DIM => return prefix_search(data, queries, hint),
+        NnStrategy::Prefix if d >= 2 * PREFIX_MIN => return prefix_search(data, queries, hint),
         _ => {}
     }
     // Row-major copies: each row contiguous, for the direct re-checks.
@@ -333,7 +369,7 @@ fn prefix_search_with(
     union_density: usize,
 ) -> Vec<usize> {
     let (nx, d, nq) = (data.nrows(), data.ncols(), queries.nrows());
-    let m = PREFIX_DIM.min(d);
+    let m = prefix_width(d);
     // Both sets in a spatially coherent order (principal-direction
     // bisection on the prefix): consecutive queries then share most of
     // their surviving rows, which stay in cache, contiguous.

@@ -122,15 +122,17 @@ fn tree_search_equals_brute_force_on_spectral_embeddings() {
     }
 }
 
-/// The prefix search on spectral embeddings (dimensions above the prefix,
-/// where it is used): equal to brute force for every query, with no guess,
+/// The prefix search on spectral embeddings (from its narrowest prefix to
+/// the full one): equal to brute force for every query, with no guess,
 /// with exact guesses, with wrong and out-of-range guesses (on ~1100 rows,
 /// where `nearest_rows_hinted` picks it from d = 64).
 #[test]
 fn prefix_search_equals_brute_force_whatever_the_guesses() {
     let b = basis(&common::bumpy(48, 24), 80);
     let n = b.n();
-    for k in [PREFIX_DIM + 1, 48, 80] {
+    // 16: the narrowest prefix (8 coordinates); 30, 41, 48: half of the
+    // coordinates; 80: PREFIX_DIM of them.
+    for k in [2 * PREFIX_MIN, 30, PREFIX_DIM + 1, 48, 80] {
         let x = b.eigenvectors.columns(0, k).into_owned();
         // Queries: rows moved by a perturbation that grows with the
         // frequency (as a noisy functional map does), plus far points.
@@ -153,6 +155,11 @@ fn prefix_search_equals_brute_force_whatever_the_guesses() {
             .collect();
         for hint in [&brute, &shifted, &wild] {
             assert_eq!(nearest_rows_hinted(&x, &q, hint), brute, "k = {k}");
+            assert_eq!(
+                nearest_rows_hinted_with(&x, &q, hint, NnStrategy::Prefix),
+                brute,
+                "k = {k}, prefix with guesses"
+            );
         }
         // Every row is its own nearest (no two vertices share an embedding).
         let own = nearest_rows_with(&x, &x, NnStrategy::Prefix);

@@ -7,6 +7,7 @@ use nalgebra::DMatrix;
 
 use crate::linalg::{nearest_orthonormal, point_map, pullback};
 use crate::{Error, Iteration, RefineReport, Refined, Refiner, Result, check_k, count_changed};
+use fmaps_solve::NnStrategy;
 
 /// ICP in the spectral domain: alternate `T_BA = NN(C)` and
 /// `C ← U Vᵀ` for the SVD `U Σ Vᵀ` of `Φ_Bᵀ M_B Π_BA Φ_A`, at the input's
@@ -64,9 +65,20 @@ impl Refiner for Icp {
             nn_seconds: 0.0,
             seconds: 0.0,
         };
+        // ICP's map changes little from one iteration to the next, so the
+        // previous one is a good guess at every step: the prefix search
+        // pays from lower dimensions than in ZoomOut, whose early maps are
+        // noisy (measured: 21% less NN time at k = 50; the tree is better
+        // up to 48 dimensions).
+        let dim = if self.adjoint { ka } else { kb };
+        let strategy = if dim > 48 {
+            NnStrategy::Prefix
+        } else {
+            NnStrategy::Auto
+        };
         let nn = |c: &DMatrix<f64>, hint: Option<&[usize]>, report: &mut RefineReport| {
             let t = Instant::now();
-            let map = point_map(c, phi_a, phi_b, self.adjoint, hint);
+            let map = point_map(c, phi_a, phi_b, self.adjoint, hint, strategy);
             report.nn_searches += 1;
             report.nn_seconds += t.elapsed().as_secs_f64();
             map

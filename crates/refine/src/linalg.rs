@@ -4,7 +4,7 @@
 
 use faer::linalg::matmul::matmul;
 use faer::{Accum, MatMut, MatRef, Par};
-use fmaps_solve::{nearest_rows, nearest_rows_hinted};
+use fmaps_solve::{NnStrategy, nearest_rows, nearest_rows_hinted_with};
 use nalgebra::DMatrix;
 
 /// The first `k` columns of a column-major matrix as a faer view.
@@ -31,13 +31,15 @@ fn product(a: MatRef<'_, f64>, b: MatRef<'_, f64>) -> DMatrix<f64> {
 /// Spectral embeddings of A (data) and B (queries) for the conversion of a
 /// k_B x k_A map: direct `(Φ_A Cᵀ, Φ_B)`, adjoint `(Φ_A, Φ_B C)`.
 /// `phi_a`/`phi_b` hold at least k_A / k_B columns. `hint`: a guess of the
-/// answer (the previous iteration's map; speed only, never the result).
+/// answer (the previous iteration's map), searched with `strategy`; speed
+/// only, never the result.
 pub(crate) fn point_map(
     c_ab: &DMatrix<f64>,
     phi_a: &DMatrix<f64>,
     phi_b: &DMatrix<f64>,
     adjoint: bool,
     hint: Option<&[usize]>,
+    strategy: NnStrategy,
 ) -> Vec<usize> {
     let (kb, ka) = c_ab.shape();
     let c = MatRef::from_column_major_slice(c_ab.as_slice(), kb, ka);
@@ -53,7 +55,9 @@ pub(crate) fn point_map(
         )
     };
     match hint {
-        Some(h) if h.len() == queries.nrows() => nearest_rows_hinted(&data, &queries, h),
+        Some(h) if h.len() == queries.nrows() => {
+            nearest_rows_hinted_with(&data, &queries, h, strategy)
+        }
         _ => nearest_rows(&data, &queries),
     }
 }

@@ -7,6 +7,7 @@ use nalgebra::DMatrix;
 
 use crate::linalg::{gather_rhs, gram, point_map, pullback};
 use crate::{Error, Iteration, RefineReport, Refined, Refiner, Result, check_k, count_changed};
+use fmaps_solve::NnStrategy;
 
 /// Vertices of A and of B on which the ZoomOut iterations run (the paper's
 /// fast variant); typically a few thousand farthest points per shape
@@ -221,7 +222,7 @@ impl Refiner for ZoomOut {
                       queries: &DMatrix<f64>,
                       hint: Option<&[usize]>| {
             let t = Instant::now();
-            let map = point_map(c, data, queries, self.adjoint, hint);
+            let map = point_map(c, data, queries, self.adjoint, hint, NnStrategy::Auto);
             report.nn_searches += 1;
             report.nn_seconds += t.elapsed().as_secs_f64();
             map
