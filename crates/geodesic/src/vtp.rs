@@ -221,69 +221,37 @@ impl<'a> Vtp<'a> {
         let t = self.topo;
         let fans = self.fans;
         let total = fans.total[v];
-        // The shadow, widened by a rounding margin, as [lo, hi] with
-        // lo in [0, θ).
+        // The shadow, widened by a rounding margin: [lo, lo + width] (mod θ).
         let margin = 1e-9;
         let lo = (self.dir[v] + PI - margin).rem_euclid(total);
         let width = total - 2.0 * PI + 2.0 * margin;
+        let in_shadow = |a: f64| everywhere || (a - lo).rem_euclid(total) <= width;
         for &(f, k) in &t.ring[v] {
-            let l = t.len[f];
-            let fv = t.faces[f];
-            let c = 3 * f + k;
-            // Corner sector [phi, phi + gamma]: from the edge to `first`
-            // to the edge to `second`.
+            let (l, fv, c) = (t.len[f], t.faces[f], 3 * f + k);
+            // Corner sector [phi, phi + gamma]: from the edge to corner cf
+            // to the edge to corner cs (the edge from v to one is opposite
+            // the other).
             let (phi, gamma) = (fans.phi[c], fans.gamma[c]);
-            let (first, second, l_first, l_second) = if fans.first_next[c] {
-                (
-                    fv[(k + 1) % 3],
-                    fv[(k + 2) % 3],
-                    l[(k + 2) % 3],
-                    l[(k + 1) % 3],
-                )
+            let (cf, cs) = if fans.first_next[c] {
+                ((k + 1) % 3, (k + 2) % 3)
             } else {
-                (
-                    fv[(k + 2) % 3],
-                    fv[(k + 1) % 3],
-                    l[(k + 1) % 3],
-                    l[(k + 2) % 3],
-                )
+                ((k + 2) % 3, (k + 1) % 3)
             };
-            if everywhere {
-                self.relax(
-                    first,
-                    d + l_first,
-                    fans.toward(3 * f + corner_of(fv, first), v, fv),
-                );
-                self.relax(
-                    second,
-                    d + l_second,
-                    fans.toward(3 * f + corner_of(fv, second), v, fv),
-                );
-                if let Some(w) = spoke_window(t, f, k, d) {
-                    self.append(w);
-                }
-                continue;
-            }
-            let in_shadow = |a: f64| (a - lo).rem_euclid(total) <= width;
             if in_shadow(phi) {
-                self.relax(
-                    first,
-                    d + l_first,
-                    fans.toward(3 * f + corner_of(fv, first), v, fv),
-                );
+                self.relax(fv[cf], d + l[cs], fans.toward(3 * f + cf, v, fv));
             }
             if in_shadow(phi + gamma) {
-                self.relax(
-                    second,
-                    d + l_second,
-                    fans.toward(3 * f + corner_of(fv, second), v, fv),
-                );
+                self.relax(fv[cs], d + l[cf], fans.toward(3 * f + cs, v, fv));
             }
             let Some(w) = spoke_window(t, f, k, d) else {
                 continue;
             };
+            if everywhere {
+                self.append(w);
+                continue;
+            }
             // The parts of the shadow inside this corner, as angles from
-            // the edge to `first` (the shadow may wrap around θ).
+            // the edge to corner cf (the shadow may wrap around θ).
             for shift in [-total, 0.0, total] {
                 let (a0, a1) = (
                     (lo + shift - phi).max(0.0),
@@ -295,7 +263,7 @@ impl<'a> Vtp<'a> {
                 // Where rays from v at those angles meet the opposite edge,
                 // in the window's frame (v at (sx, sy), the edge on y = 0).
                 let le = l[k];
-                let from_origin = t.faces[w.face][(w.edge + 1) % 3] == first;
+                let from_origin = t.faces[w.face][(w.edge + 1) % 3] == fv[cf];
                 let ang = |a: f64| {
                     if from_origin {
                         (-w.sx).atan2(w.sy) + a
