@@ -400,14 +400,14 @@ impl Apex {
         let b = l[(k + 1) % 3]; // |e1 v3|
         let px = (a * a - b * b + le * le) / (2.0 * le);
         let py = -(a * a - px * px).max(0.0).sqrt();
-        let xv = w.sx + (px - w.sx) * w.sy / (w.sy - py);
         Self {
             v3: f[k],
             px,
             py,
-            xv,
+            xv: 0.0,
             le,
         }
+        .for_window(w)
     }
 
     /// The same face seen from another window on the same edge.
