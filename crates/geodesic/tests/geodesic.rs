@@ -394,3 +394,34 @@ fn vtp_agrees_with_window_ordered_propagation() {
         }
     }
 }
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 32, ..ProptestConfig::default() })]
+
+    /// VTP against the window-ordered scheme on randomly roughened
+    /// spheres (random saddles, random excess angles up to tens of
+    /// degrees) from a random source, whole fields and one early stop.
+    #[test]
+    fn vtp_agrees_on_random_rough_spheres(
+        noise in proptest::collection::vec(-1.0f64..1.0, 162),
+        amplitude in 0.0f64..0.15,
+        source in 0usize..162,
+        target in 0usize..162,
+    ) {
+        let (mut v, f) = icosphere(1.0, 2).into_parts();
+        for (p, e) in v.iter_mut().zip(&noise) {
+            let s = 1.0 + amplitude * e;
+            *p = [p[0] * s, p[1] * s, p[2] * s];
+        }
+        let mesh = TriMesh::new(v, f).unwrap();
+        let vtp = ExactSolver::new(&mesh).unwrap();
+        let ordered = vtp.clone().with_algorithm(ExactAlgorithm::WindowOrdered);
+        let a = vtp.distances(&[source]).unwrap();
+        let b = ordered.distances(&[source]).unwrap();
+        for i in 0..a.len() {
+            prop_assert!((a[i] - b[i]).abs() <= 1e-12 * (1.0 + b[i]), "vertex {}: {} vs {}", i, a[i], b[i]);
+        }
+        let early = vtp.distances_to(&[source], &[target]).unwrap();
+        prop_assert_eq!(early[0], a[target]);
+    }
+}
