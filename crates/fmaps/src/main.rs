@@ -234,8 +234,12 @@ enum RefineKind {
 
 #[derive(Clone, Copy, ValueEnum)]
 enum GeodesicMethod {
-    /// Exact polyhedral distances (window propagation).
+    /// Exact polyhedral distances (VTP window propagation with saddle
+    /// shadows).
     Exact,
+    /// Exact, by the independent window-ordered reference scheme (slower;
+    /// for cross-checks).
+    ExactOrdered,
     /// The heat method (approximate, fast for many sources).
     Heat,
     /// Shortest paths along edges (an upper bound).
@@ -246,6 +250,7 @@ impl GeodesicMethod {
     fn name(self) -> &'static str {
         match self {
             GeodesicMethod::Exact => "exact",
+            GeodesicMethod::ExactOrdered => "exact-ordered",
             GeodesicMethod::Heat => "heat-method",
             GeodesicMethod::Dijkstra => "Dijkstra",
         }
@@ -673,6 +678,11 @@ fn distance_solver(
     use fmaps::geodesic::{DijkstraSolver, ExactSolver, HeatParams, HeatSolver};
     Ok(match method {
         GeodesicMethod::Exact => Box::new(ExactSolver::new(mesh).map_err(input)?),
+        GeodesicMethod::ExactOrdered => Box::new(
+            ExactSolver::new(mesh)
+                .map_err(input)?
+                .with_algorithm(fmaps::geodesic::ExactAlgorithm::WindowOrdered),
+        ),
         GeodesicMethod::Heat => {
             Box::new(HeatSolver::new(mesh, &HeatParams::default()).map_err(input)?)
         }

@@ -188,6 +188,34 @@ fn geodesic_distances_on_a_flat_grid() {
     assert_eq!(d.len(), 35);
     // The far corner (3, 2) is at Euclidean distance sqrt(13).
     assert!((d[34] - 13f64.sqrt()).abs() < 1e-12);
+    // The reference scheme gives the same distances.
+    let out2 = dir.join("d2.txt");
+    let st = fmaps()
+        .args(["geodesic", mesh.to_str().unwrap(), "--source", "0"])
+        .args([
+            "--method",
+            "exact-ordered",
+            "--json",
+            "--out",
+            out2.to_str().unwrap(),
+        ])
+        .output()
+        .unwrap();
+    assert!(
+        st.status.success(),
+        "{}",
+        String::from_utf8_lossy(&st.stderr)
+    );
+    let v: serde_json::Value = serde_json::from_slice(&st.stdout).unwrap();
+    assert_eq!(v["method"], "exact-ordered");
+    let d2: Vec<f64> = std::fs::read_to_string(&out2)
+        .unwrap()
+        .lines()
+        .map(|l| l.parse().unwrap())
+        .collect();
+    for (a, b) in d.iter().zip(&d2) {
+        assert!((a - b).abs() <= 1e-12 * (1.0 + a));
+    }
     let bad = fmaps()
         .args(["geodesic", mesh.to_str().unwrap(), "--source", "99"])
         .output()

@@ -209,8 +209,12 @@ impl ExactSolver {
 }
 
 impl DistanceSolver for ExactSolver {
+    /// "exact" (VTP), or "exact-ordered" for the reference scheme.
     fn name(&self) -> &'static str {
-        "exact"
+        match self.algorithm {
+            ExactAlgorithm::Vtp => "exact",
+            ExactAlgorithm::WindowOrdered => "exact-ordered",
+        }
     }
 
     fn n_vertices(&self) -> usize {
