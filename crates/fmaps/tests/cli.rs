@@ -160,59 +160,36 @@ fn geodesic_distances_on_a_flat_grid() {
     let dir = tmpdir("geo");
     let mesh = dir.join("grid.off");
     fmaps::mesh_io::write_mesh(&mesh, &fmaps::mesh_io::generate::grid(3.0, 2.0, 6, 4)).unwrap();
-    let out = dir.join("d.txt");
-    let st = fmaps()
-        .args([
-            "geodesic",
-            mesh.to_str().unwrap(),
-            "--source",
-            "0",
-            "--out",
-            out.to_str().unwrap(),
-            "--json",
-        ])
-        .output()
-        .unwrap();
-    assert!(
-        st.status.success(),
-        "{}",
-        String::from_utf8_lossy(&st.stderr)
-    );
-    let v: serde_json::Value = serde_json::from_slice(&st.stdout).unwrap();
-    assert_eq!(v["method"], "exact");
-    let d: Vec<f64> = std::fs::read_to_string(&out)
-        .unwrap()
-        .lines()
-        .map(|l| l.parse().unwrap())
-        .collect();
+    // `fmaps geodesic --method METHOD --json --out FILE`: the method named
+    // in the JSON, and the distances in the file.
+    let run = |method: &str| -> (String, Vec<f64>) {
+        let out = dir.join(format!("{method}.txt"));
+        let st = fmaps()
+            .args(["geodesic", mesh.to_str().unwrap(), "--source", "0"])
+            .args(["--method", method, "--json", "--out", out.to_str().unwrap()])
+            .output()
+            .unwrap();
+        assert!(
+            st.status.success(),
+            "{}",
+            String::from_utf8_lossy(&st.stderr)
+        );
+        let v: serde_json::Value = serde_json::from_slice(&st.stdout).unwrap();
+        let d = std::fs::read_to_string(&out)
+            .unwrap()
+            .lines()
+            .map(|l| l.parse().unwrap())
+            .collect();
+        (v["method"].as_str().unwrap_or("").to_string(), d)
+    };
+    let (name, d) = run("exact");
+    assert_eq!(name, "exact");
     assert_eq!(d.len(), 35);
     // The far corner (3, 2) is at Euclidean distance sqrt(13).
     assert!((d[34] - 13f64.sqrt()).abs() < 1e-12);
     // The reference scheme gives the same distances.
-    let out2 = dir.join("d2.txt");
-    let st = fmaps()
-        .args(["geodesic", mesh.to_str().unwrap(), "--source", "0"])
-        .args([
-            "--method",
-            "exact-ordered",
-            "--json",
-            "--out",
-            out2.to_str().unwrap(),
-        ])
-        .output()
-        .unwrap();
-    assert!(
-        st.status.success(),
-        "{}",
-        String::from_utf8_lossy(&st.stderr)
-    );
-    let v: serde_json::Value = serde_json::from_slice(&st.stdout).unwrap();
-    assert_eq!(v["method"], "exact-ordered");
-    let d2: Vec<f64> = std::fs::read_to_string(&out2)
-        .unwrap()
-        .lines()
-        .map(|l| l.parse().unwrap())
-        .collect();
+    let (name, d2) = run("exact-ordered");
+    assert_eq!(name, "exact-ordered");
     for (a, b) in d.iter().zip(&d2) {
         assert!((a - b).abs() <= 1e-12 * (1.0 + a));
     }
