@@ -51,8 +51,8 @@ pub(crate) struct Vtp<'a> {
     /// paths of that length arrive from several directions.
     dir: Vec<f64>,
     any_dir: Vec<bool>,
+    /// Whether a vertex's last cast went all around (not only its shadow).
     emitted_everywhere: Vec<bool>,
-    d3s: Vec<(f64, f64, f64)>,
     pub dist: Vec<f64>,
     state: Vec<u8>,
     /// Distance at which each vertex last cast its pseudo-source windows.
@@ -70,7 +70,11 @@ pub(crate) struct Vtp<'a> {
     /// Settled pseudo-source vertices whose distance dropped: they cast
     /// their windows again.
     recast: Vec<usize>,
+    /// Reused per list: the windows left after trimming, and for each its
+    /// path to the far vertex `(length, crossing x, x of the straight
+    /// ray)`.
     kept: Vec<Window>,
+    d3s: Vec<(f64, f64, f64)>,
     /// Early stop: per slot the nearest distance of its pending windows,
     /// and a heap of (minimum, slot) with stale entries.
     track: bool,
