@@ -209,11 +209,12 @@ pub fn bench_refine(args: &Args) -> anyhow::Result<()> {
         basis_1.n()
     );
     println!(
-        "{:>4} {:>11} {:>11} {:>12} {:>11} {:>13} {:>13} {:>11} {:>9} {:>9}  agree",
+        "{:>4} {:>11} {:>11} {:>12} {:>11} {:>11} {:>13} {:>13} {:>11} {:>9} {:>9}  agree",
         "k",
         "fmaps tree",
         "fmaps brute",
         "fmaps prefix",
+        "fmaps tiles",
         "fmaps auto",
         "auto+guesses",
         "sklearn brute",
@@ -239,6 +240,11 @@ pub fn bench_refine(args: &Args) -> anyhow::Result<()> {
         let (t_prefix, i_prefix) = pool.install(|| {
             time(args.bench.repeat, || {
                 nearest_rows_with(&data, &queries, NnStrategy::Prefix)
+            })
+        });
+        let (t_tiles, i_tiles) = pool.install(|| {
+            time(args.bench.repeat, || {
+                nearest_rows_with(&data, &queries, NnStrategy::Tiles)
             })
         });
         let (t_auto, i_auto) = pool.install(|| {
@@ -268,8 +274,11 @@ pub fn bench_refine(args: &Args) -> anyhow::Result<()> {
         save(&dp, &data)?;
         save(&qp, &queries)?;
         let mut peer = Vec::new();
-        let mut agree =
-            i_tree == i_brute && i_prefix == i_brute && i_auto == i_brute && i_hinted == i_brute;
+        let mut agree = i_tree == i_brute
+            && i_prefix == i_brute
+            && i_tiles == i_brute
+            && i_auto == i_brute
+            && i_hinted == i_brute;
         for method in ["sklearn-brute", "ckdtree"] {
             let out = work.join(format!("idx-{method}-{k}.npy"));
             let r = run(Command::new(&py)
@@ -287,14 +296,14 @@ pub fn bench_refine(args: &Args) -> anyhow::Result<()> {
             agree &= idx.iter().zip(&i_tree).all(|(&p, &o)| p as usize == o);
         }
         println!(
-            "{k:>4} {t_tree:>11.4} {t_brute:>11.4} {t_prefix:>12.4} {t_auto:>11.4} {t_hinted:>13.4} {:>13.4} {:>11.4} {:>8.1}x {:>8.1}x  {}",
+            "{k:>4} {t_tree:>11.4} {t_brute:>11.4} {t_prefix:>12.4} {t_tiles:>11.4} {t_auto:>11.4} {t_hinted:>13.4} {:>13.4} {:>11.4} {:>8.1}x {:>8.1}x  {}",
             peer[0],
             peer[1],
             peer[0] / t_auto,
             peer[1] / t_auto,
             if agree { "yes" } else { "NO" }
         );
-        nn_rows.push(json!({"k": k, "fmaps_tree": t_tree, "fmaps_brute": t_brute, "fmaps_prefix": t_prefix, "fmaps_auto": t_auto, "fmaps_auto_guesses": t_hinted,
+        nn_rows.push(json!({"k": k, "fmaps_tree": t_tree, "fmaps_brute": t_brute, "fmaps_prefix": t_prefix, "fmaps_tiles": t_tiles, "fmaps_auto": t_auto, "fmaps_auto_guesses": t_hinted,
             "sklearn_brute": peer[0], "ckdtree": peer[1], "indices_agree": agree}));
     }
     if args.nn_only {

@@ -33,6 +33,7 @@
 mod energy;
 mod nn;
 mod operators;
+mod tiles;
 mod types;
 mod weights;
 
@@ -44,7 +45,7 @@ pub use energy::{
 };
 pub use nn::{
     NnStrategy, PREFIX_DIM, PREFIX_MIN, nearest_rows, nearest_rows_hinted,
-    nearest_rows_hinted_with, nearest_rows_with,
+    nearest_rows_hinted_with, nearest_rows_with, tiles_available,
 };
 pub use operators::{multiplication_operators, orientation_operators};
 pub use types::{FunctionalMap, PointMap};

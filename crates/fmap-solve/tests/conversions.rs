@@ -82,6 +82,7 @@ fn nearest_rows_matches_a_naive_search() {
             NnStrategy::Brute,
             NnStrategy::Tree,
             NnStrategy::Prefix,
+            NnStrategy::Tiles,
         ] {
             let got = nearest_rows_with(&x, &q, strategy);
             for (i, &g) in got.iter().enumerate() {
@@ -116,6 +117,8 @@ fn tree_search_equals_brute_force_on_spectral_embeddings() {
         let brute = nearest_rows_with(&x, &q, NnStrategy::Brute);
         let tree = nearest_rows_with(&x, &q, NnStrategy::Tree);
         assert_eq!(brute, tree, "k = {k}");
+        let tiles = nearest_rows_with(&x, &q, NnStrategy::Tiles);
+        assert_eq!(brute, tiles, "k = {k}, tiles");
         // The unperturbed embedding maps every vertex to itself.
         let own = nearest_rows_with(&x, &x, NnStrategy::Tree);
         assert!(own.iter().enumerate().all(|(i, &j)| i == j), "k = {k}");
@@ -153,8 +156,18 @@ fn prefix_search_equals_brute_force_whatever_the_guesses() {
         let wild: Vec<usize> = (0..n)
             .map(|i| if i % 3 == 0 { n + i } else { (i * 31) % n })
             .collect();
+        assert_eq!(
+            nearest_rows_with(&x, &q, NnStrategy::Tiles),
+            brute,
+            "k = {k}, tiles"
+        );
         for hint in [&brute, &shifted, &wild] {
             assert_eq!(nearest_rows_hinted(&x, &q, hint), brute, "k = {k}");
+            assert_eq!(
+                nearest_rows_hinted_with(&x, &q, hint, NnStrategy::Tiles),
+                brute,
+                "k = {k}, tiles with guesses"
+            );
             assert_eq!(
                 nearest_rows_hinted_with(&x, &q, hint, NnStrategy::Prefix),
                 brute,
@@ -165,6 +178,69 @@ fn prefix_search_equals_brute_force_whatever_the_guesses() {
         let own = nearest_rows_with(&x, &x, NnStrategy::Prefix);
         assert!(own.iter().enumerate().all(|(i, &j)| i == j), "k = {k}");
     }
+}
+
+/// The tile search where bf16 resolves nothing (rows 1e-3 apart on a
+/// common offset of 1e3: the bf16 step there is 4) and where its products
+/// could overflow (1e16, handed to brute force): the exact answer.
+#[test]
+fn tiles_exact_where_bf16_is_coarse_or_out_of_range() {
+    for (offset, spread) in [(1e3, 1e-3), (1.0, 3e-3), (1e16, 1e13), (0.0, 1e-30)] {
+        let (nx, d) = (300, 40);
+        let x = DMatrix::from_fn(nx, d, |i, j| {
+            offset + spread * (((i * 37 + j * 11) % 101) as f64 - 50.0)
+        });
+        let q = DMatrix::from_fn(120, d, |i, j| {
+            offset + spread * (((i * 53 + j * 7) % 97) as f64 - 48.5)
+        });
+        let got = nearest_rows_with(&x, &q, NnStrategy::Tiles);
+        for (i, &g) in got.iter().enumerate() {
+            let dist = |k: usize| (x.row(k) - q.row(i)).norm_squared();
+            let best = (0..nx)
+                .min_by(|&a, &b| dist(a).total_cmp(&dist(b)).then(a.cmp(&b)))
+                .unwrap();
+            assert_eq!(g, best, "offset {offset}, query {i}");
+        }
+    }
+    // Near ties: each query a hair off the midpoint of two random rows in
+    // [0.5, 1.5]^d (bf16 steps of 2⁻⁸..2⁻⁷ there), so that the two
+    // distances differ far below the bf16 rounding of the scores.
+    let mut st = 99u64;
+    let mut rnd = || {
+        st = st
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        (st >> 11) as f64 / (1u64 << 53) as f64
+    };
+    let (nx, d) = (400, 64);
+    let x = DMatrix::from_fn(nx, d, |_, _| 0.5 + rnd());
+    let q = DMatrix::from_fn(400, d, |i, j| {
+        let (a, b) = ((i * 7) % nx, (i * 13 + 1) % nx);
+        0.5 * (x[(a, j)] + x[(b, j)]) + 1e-7 * (rnd() - 0.5)
+    });
+    let got = nearest_rows_with(&x, &q, NnStrategy::Tiles);
+    for (i, &g) in got.iter().enumerate() {
+        let dist = |k: usize| (x.row(k) - q.row(i)).norm_squared();
+        let best = (0..nx)
+            .min_by(|&a, &b| dist(a).total_cmp(&dist(b)).then(a.cmp(&b)))
+            .unwrap();
+        assert_eq!(g, best, "near tie, query {i}");
+    }
+    // The worst case of the bound: every coordinate of the query (1 +
+    // 0.99·2⁻⁸) and of row 5 (1 + 0.98·2⁻⁸) rounds down to 1, so row 5's
+    // score is computed too high by nearly the whole bound; row 9 (1 −
+    // 0.4·2⁻⁸, also 1 in bf16, smaller norm) ranks first and is farther.
+    // A bound half as large misses row 5.
+    let h = 2f64.powi(-8);
+    let mut x = DMatrix::from_fn(64, d, |_, _| 2.0 + rnd());
+    x.row_mut(5).fill(1.0 + 0.98 * h);
+    x.row_mut(9).fill(1.0 - 0.4 * h);
+    let q = DMatrix::from_element(3, d, 1.0 + 0.99 * h);
+    assert_eq!(nearest_rows_with(&x, &q, NnStrategy::Tiles), vec![5; 3]);
+    assert_eq!(
+        nearest_rows_hinted_with(&x, &q, &[9, 9, 0], NnStrategy::Tiles),
+        vec![5; 3]
+    );
 }
 
 #[test]

@@ -66,12 +66,12 @@ impl Refiner for Icp {
             seconds: 0.0,
         };
         // ICP's map changes little from one iteration to the next, so the
-        // previous one is a good guess at every step: the prefix search
-        // pays from lower dimensions than in ZoomOut, whose early maps are
-        // noisy (measured: 21% less NN time at k = 50; the tree is better
-        // up to 48 dimensions).
+        // previous one is a good guess at every step: without matrix tiles
+        // the prefix search pays from lower dimensions than in ZoomOut,
+        // whose early maps are noisy (measured: 21% less NN time at k =
+        // 50; the tree is better up to 48 dimensions).
         let dim = if self.adjoint { ka } else { kb };
-        let strategy = if dim > 48 {
+        let strategy = if dim > 48 && !fmaps_solve::tiles_available() {
             NnStrategy::Prefix
         } else {
             NnStrategy::Auto

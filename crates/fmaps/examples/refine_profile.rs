@@ -1,0 +1,33 @@
+//! Times ZoomOut 50:150:5 and ICP on one FAUST pair, repeatedly, for
+//! profiling: `cargo run --release -p fmaps --example refine_profile --
+//! A.off B.off [zoomout|icp] [repeats]`.
+use std::time::Instant;
+
+use fmaps::pipeline::{MatchParams, match_prepared, prepare};
+use fmaps::refine::{Icp, Refiner, ZoomOut};
+
+fn main() -> Result<(), Box<dyn std::error::Error>> {
+    let args: Vec<String> = std::env::args().collect();
+    let ma = fmaps::mesh_io::read_mesh(&args[1])?;
+    let mb = fmaps::mesh_io::read_mesh(&args[2])?;
+    let which = args.get(3).map_or("zoomout", |s| s.as_str());
+    let reps: usize = args.get(4).map_or(3, |s| s.parse().unwrap());
+    let params = MatchParams::default();
+    let (pa, pb) = (prepare(&ma, &params)?, prepare(&mb, &params)?);
+    let init = match_prepared(&pa, &pb, &params)?;
+    let refiner: Box<dyn Refiner> = match which {
+        "icp" => Box::new(Icp::default()),
+        _ => Box::new(ZoomOut::default()),
+    };
+    for _ in 0..reps {
+        let t = Instant::now();
+        let r = refiner.refine(&init.c_ba, &pb.basis, &pa.basis)?;
+        println!(
+            "{} {:.3} s (nn {:.3} s)",
+            refiner.name(),
+            t.elapsed().as_secs_f64(),
+            r.report.nn_seconds
+        );
+    }
+    Ok(())
+}
