@@ -1,10 +1,11 @@
 //! Times one nearest-neighbour strategy on saved embeddings (as written
 //! by `cargo xtask bench-refine`, float64 `.npy`), for profiling:
 //! `cargo run --release -p fmaps-solve --example nn_profile --
-//! target/bench/refine/data150.npy target/bench/refine/query150.npy tiles 20`.
+//! target/bench/refine/data150.npy target/bench/refine/query150.npy tiles 20
+//! [hint]`.
 use std::time::Instant;
 
-use fmaps_solve::{NnStrategy, nearest_rows_with};
+use fmaps_solve::{NnStrategy, nearest_rows_hinted_with, nearest_rows_with};
 use nalgebra::DMatrix;
 
 /// A float64 `.npy` matrix (either order).
@@ -44,12 +45,18 @@ fn main() {
         _ => NnStrategy::Auto,
     };
     let reps: usize = args.get(4).map_or(10, |s| s.parse().expect("a count"));
+    // `hint` as a fifth argument: the answer itself as guesses (as late in
+    // ZoomOut and ICP).
+    let hint = (args.get(5).map(|s| s.as_str()) == Some("hint"))
+        .then(|| nearest_rows_with(&data, &queries, NnStrategy::Brute));
     let t = Instant::now();
     let mut sum = 0usize;
     for _ in 0..reps {
-        sum += nearest_rows_with(&data, &queries, strategy)
-            .iter()
-            .sum::<usize>();
+        let found = match &hint {
+            Some(h) => nearest_rows_hinted_with(&data, &queries, h, strategy),
+            None => nearest_rows_with(&data, &queries, strategy),
+        };
+        sum += found.iter().sum::<usize>();
     }
     println!(
         "{strategy:?}: {:.4} s per search ({} x {} among {}, checksum {sum})",

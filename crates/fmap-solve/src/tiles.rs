@@ -101,7 +101,7 @@ mod imp {
     /// Queries per parallel task: the data chunk in cache serves them all.
     const QB: usize = 128;
     /// Data rows per chunk (a multiple of 32).
-    const CHUNK: usize = 1024;
+    const CHUNK: usize = 256;
 
     pub fn available() -> bool {
         static ON: OnceLock<bool> = OnceLock::new();
@@ -217,28 +217,40 @@ mod imp {
         hint: Option<&[usize]>,
     ) -> Option<Vec<usize>> {
         let (nx, d, nq) = (data.nrows(), data.ncols(), queries.nrows());
-        if !within_range(data.as_slice()) || !within_range(queries.as_slice()) {
-            return None;
-        }
         let dp = d.div_ceil(32) * 32;
         let nxp = nx.div_ceil(32) * 32;
-        let x_rows = row_major(data, None);
+        let (x_rows, q_rows) = rayon::join(|| row_major(data, None), || row_major(queries, None));
         let mut bf = vec![0u16; nxp * dp];
         let mut xn = vec![0.0f64; nx];
         // Group by group (16 rows, in parallel), row by row: the bf16
         // values go to their interleaved places in the group's block.
-        bf.par_chunks_mut(dp * 16)
+        let in_range = bf
+            .par_chunks_mut(dp * 16)
             .zip(xn.par_chunks_mut(16))
             .enumerate()
-            .for_each(|(g, (out, xn))| {
+            .map(|(g, (out, xn))| {
+                let mut ok = true;
+                let mut h = vec![0u16; dp];
                 for (rr, xn) in xn.iter_mut().enumerate() {
                     let row = &x_rows[(g * 16 + rr) * d..(g * 16 + rr + 1) * d];
-                    for (j, &v) in row.iter().enumerate() {
-                        out[(j / 2) * 32 + rr * 2 + (j & 1)] = to_bf16(v);
+                    ok &= within_range(row);
+                    // The row in bf16 (a vectorised loop), then its pairs
+                    // to their places, 64 bytes apart.
+                    for (o, &v) in h.iter_mut().zip(row) {
+                        *o = to_bf16(v);
+                    }
+                    for (p, pair) in h.chunks_exact(2).enumerate() {
+                        out[p * 32 + rr * 2] = pair[0];
+                        out[p * 32 + rr * 2 + 1] = pair[1];
                     }
                     *xn = row.iter().map(|v| v * v).sum();
                 }
-            });
+                ok
+            })
+            .reduce(|| true, |a, b| a && b);
+        if !in_range {
+            return None;
+        }
         let mut xn32: Vec<f32> = xn.iter().map(|&v| v as f32).collect();
         xn32.resize(nxp, f32::INFINITY);
         let ctx = Ctx {
@@ -249,9 +261,8 @@ mod imp {
             xn32,
             xn_max: xn.iter().fold(0.0f64, |a, &b| a.max(b)),
         };
-        let q_rows = row_major(queries, None);
         let starts: Vec<usize> = (0..nq).step_by(QB).collect();
-        let found: Vec<Vec<usize>> = starts
+        let found: Vec<Option<Vec<usize>>> = starts
             .par_iter()
             .map_init(
                 || Work {
@@ -267,14 +278,27 @@ mod imp {
                 },
             )
             .collect();
-        Some(found.into_iter().flatten().collect())
+        let mut out = Vec::with_capacity(nq);
+        for block in found {
+            out.extend(block?);
+        }
+        Some(out)
     }
 
     /// Whether every value is finite and below 1e15 in magnitude (then no
     /// bf16 product or f32 sum of them overflows).
+    #[inline(always)]
     fn within_range(v: &[f64]) -> bool {
-        // A NaN fails the comparison too.
-        v.iter().fold(true, |ok, x| ok & (x.abs() < 1e15))
+        // A NaN fails the comparison too. Eight lanes (vectorised).
+        let mut ok = [true; 8];
+        let chunks = v.chunks_exact(8);
+        let rest = chunks.remainder();
+        for c in chunks {
+            for l in 0..8 {
+                ok[l] &= c[l].abs() < 1e15;
+            }
+        }
+        ok.iter().all(|&o| o) && rest.iter().all(|x| x.abs() < 1e15)
     }
 
     /// Per-thread buffers.
@@ -286,7 +310,8 @@ mod imp {
         cand: Vec<u32>,
     }
 
-    /// The nearest rows of up to QB queries (`q_rows`, f64 row-major).
+    /// The nearest rows of up to QB queries (`q_rows`, f64 row-major);
+    /// `None` if a query is not [`within_range`].
     ///
     /// # Safety
     /// The CPU must have the tiles (and Linux must have granted them) and
@@ -297,7 +322,7 @@ mod imp {
         q_rows: &[f64],
         hint: Option<&[usize]>,
         work: &mut Work,
-    ) -> Vec<usize> {
+    ) -> Option<Vec<usize>> {
         let (d, dp, nx) = (ctx.d, ctx.x.dp, ctx.nx);
         let rows = q_rows.len() / d;
         let u = f64::from(f32::EPSILON) / 2.0;
@@ -313,6 +338,9 @@ mod imp {
         let gamma = 2.0 * dp as f64 * u;
         for i in 0..rows {
             let row = &q_rows[i * d..(i + 1) * d];
+            if !within_range(row) {
+                return None;
+            }
             let out = &mut work.q[i * dp..i * dp + d];
             for (o, &v) in out.iter_mut().zip(row) {
                 *o = to_bf16(v);
@@ -424,7 +452,7 @@ mod imp {
         }
         // SAFETY: releases the tile state this thread configured.
         unsafe { asm!("tilerelease", options(nostack, nomem)) };
-        best.into_iter().map(|b| b.1).collect()
+        Some(best.into_iter().map(|b| b.1).collect())
     }
 
     fn dist(ctx: &Ctx, q: &[f64], r: usize) -> f64 {
