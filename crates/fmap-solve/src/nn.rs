@@ -664,17 +664,19 @@ pub(crate) fn row_major(m: &DMatrix<f64>, order: Option<&[usize]>) -> Vec<f64> {
     // Tiles of 8 rows (one cache line of each column; the tile stays in
     // L1), in parallel over blocks of tiles.
     let cols = m.as_slice();
-    t.par_chunks_mut(512 * d).enumerate().for_each(|(b, block)| {
-        for (s, tile) in block.chunks_mut(8 * d).enumerate() {
-            let i0 = b * 512 + s * 8;
-            let rows = tile.len() / d;
-            for j in 0..d {
-                for (i, v) in cols[j * n + i0..j * n + i0 + rows].iter().enumerate() {
-                    tile[i * d + j] = *v;
+    t.par_chunks_mut(512 * d)
+        .enumerate()
+        .for_each(|(b, block)| {
+            for (s, tile) in block.chunks_mut(8 * d).enumerate() {
+                let i0 = b * 512 + s * 8;
+                let rows = tile.len() / d;
+                for j in 0..d {
+                    for (i, v) in cols[j * n + i0..j * n + i0 + rows].iter().enumerate() {
+                        tile[i * d + j] = *v;
+                    }
                 }
             }
-        }
-    });
+        });
     match order {
         None => t,
         Some(order) => {

@@ -6,6 +6,7 @@ use faer::linalg::matmul::matmul;
 use faer::{Accum, MatMut, MatRef, Par};
 use fmaps_solve::{NnStrategy, nearest_rows, nearest_rows_hinted_with};
 use nalgebra::DMatrix;
+use rayon::prelude::*;
 
 /// The first `k` columns of a column-major matrix as a faer view.
 pub(crate) fn leading(m: &DMatrix<f64>, k: usize) -> MatRef<'_, f64> {
@@ -63,7 +64,33 @@ pub(crate) fn point_map(
 }
 
 fn copy(m: MatRef<'_, f64>) -> DMatrix<f64> {
-    DMatrix::from_fn(m.nrows(), m.ncols(), |i, j| m[(i, j)])
+    columns(m.nrows(), m.ncols(), |j, col| {
+        for (i, v) in col.iter_mut().enumerate() {
+            *v = m[(i, j)];
+        }
+    })
+}
+
+/// An n x k matrix filled column by column, in parallel.
+fn columns(n: usize, k: usize, fill: impl Fn(usize, &mut [f64]) + Sync) -> DMatrix<f64> {
+    let mut out = vec![0.0; n * k];
+    if n > 0 {
+        out.par_chunks_mut(n)
+            .enumerate()
+            .for_each(|(j, col)| fill(j, col));
+    }
+    DMatrix::from_vec(n, k, out)
+}
+
+/// `w[y] Φ_A(T(y), j)` for the first `ka` columns (`w` = 1 without
+/// weights), n_B x ka.
+fn gathered(t_ba: &[usize], phi_a: &DMatrix<f64>, ka: usize, w: Option<&[f64]>) -> DMatrix<f64> {
+    columns(t_ba.len(), ka, |j, col| {
+        let src = phi_a.column(j);
+        for (y, v) in col.iter_mut().enumerate() {
+            *v = src[t_ba[y]] * w.map_or(1.0, |w| w[y]);
+        }
+    })
 }
 
 /// `C_AB = Φ_Bᵀ M_B Π_BA Φ_A` on the first `ka`/`kb` columns (k_B x k_A).
@@ -75,8 +102,7 @@ pub(crate) fn pullback(
     kb: usize,
     mass_b: &[f64],
 ) -> DMatrix<f64> {
-    let nb = t_ba.len();
-    let weighted = DMatrix::from_fn(nb, ka, |y, j| mass_b[y] * phi_a[(t_ba[y], j)]);
+    let weighted = gathered(t_ba, phi_a, ka, Some(mass_b));
     product(leading(phi_b, kb).transpose(), leading(&weighted, ka))
 }
 
@@ -88,8 +114,8 @@ pub(crate) fn gather_rhs(
     phi_b: &DMatrix<f64>,
     kb: usize,
 ) -> DMatrix<f64> {
-    let gathered = DMatrix::from_fn(t_ba.len(), ka, |y, j| phi_a[(t_ba[y], j)]);
-    product(leading(phi_b, kb).transpose(), leading(&gathered, ka))
+    let rows = gathered(t_ba, phi_a, ka, None);
+    product(leading(phi_b, kb).transpose(), leading(&rows, ka))
 }
 
 /// `Φᵀ Φ` (k x k).
