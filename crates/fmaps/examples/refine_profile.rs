@@ -1,6 +1,6 @@
 //! Times ZoomOut 50:150:5 and ICP on one FAUST pair, repeatedly, for
 //! profiling: `cargo run --release -p fmaps --example refine_profile --
-//! A.off B.off [zoomout|icp] [repeats]`.
+//! A.off B.off [zoomout|zoomout1|icp] [repeats]`.
 use std::time::Instant;
 
 use fmaps::pipeline::{MatchParams, match_prepared, prepare};
@@ -17,6 +17,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let init = match_prepared(&pa, &pb, &params)?;
     let refiner: Box<dyn Refiner> = match which {
         "icp" => Box::new(Icp::default()),
+        "zoomout1" => Box::new(ZoomOut {
+            k_start: 30,
+            k_final: 200,
+            step: 1,
+            ..ZoomOut::default()
+        }),
         _ => Box::new(ZoomOut::default()),
     };
     for _ in 0..reps {

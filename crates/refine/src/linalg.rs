@@ -3,7 +3,7 @@
 //! GEMMs on views of the column-major eigenvector matrices.
 
 use faer::linalg::matmul::matmul;
-use faer::{Accum, MatMut, MatRef, Par};
+use faer::{Accum, Mat, MatMut, MatRef, Par};
 use fmaps_solve::{NnStrategy, nearest_rows, nearest_rows_hinted_with};
 use nalgebra::DMatrix;
 use rayon::prelude::*;
@@ -12,6 +12,35 @@ use rayon::prelude::*;
 pub(crate) fn leading(m: &DMatrix<f64>, k: usize) -> MatRef<'_, f64> {
     let n = m.nrows();
     MatRef::from_column_major_slice(&m.as_slice()[..n * k], n, k)
+}
+
+/// Rows per partial product of [`inner`].
+const INNER_CHUNK: usize = 1024;
+
+/// `aᵀ b` for tall `a` (n x p) and `b` (n x q): partial products over
+/// fixed chunks of 1024 rows in parallel, summed in order (the small
+/// output leaves a GEMM little to split otherwise; the fixed chunks keep
+/// the result independent of the thread count).
+fn inner(a: MatRef<'_, f64>, b: MatRef<'_, f64>) -> DMatrix<f64> {
+    let (n, p, q) = (a.nrows(), a.ncols(), b.ncols());
+    let starts: Vec<usize> = (0..n).step_by(INNER_CHUNK).collect();
+    let parts: Vec<Mat<f64>> = starts
+        .par_iter()
+        .map(|&r0| {
+            let rows = INNER_CHUNK.min(n - r0);
+            let mut part = Mat::<f64>::zeros(p, q);
+            matmul(
+                part.as_mut(),
+                Accum::Replace,
+                a.subrows(r0, rows).transpose(),
+                b.subrows(r0, rows),
+                1.0,
+                Par::Seq,
+            );
+            part
+        })
+        .collect();
+    DMatrix::from_fn(p, q, |i, j| parts.iter().map(|m| m[(i, j)]).sum())
 }
 
 /// `a · b` (or with `b` transposed) into a new nalgebra matrix.
@@ -103,7 +132,7 @@ pub(crate) fn pullback(
     mass_b: &[f64],
 ) -> DMatrix<f64> {
     let weighted = gathered(t_ba, phi_a, ka, Some(mass_b));
-    product(leading(phi_b, kb).transpose(), leading(&weighted, ka))
+    inner(leading(phi_b, kb), leading(&weighted, ka))
 }
 
 /// `Φ_B[:, :kb]ᵀ Y` for the least-squares pull-back on samples.
@@ -115,13 +144,13 @@ pub(crate) fn gather_rhs(
     kb: usize,
 ) -> DMatrix<f64> {
     let rows = gathered(t_ba, phi_a, ka, None);
-    product(leading(phi_b, kb).transpose(), leading(&rows, ka))
+    inner(leading(phi_b, kb), leading(&rows, ka))
 }
 
 /// `Φᵀ Φ` (k x k).
 pub(crate) fn gram(phi: &DMatrix<f64>) -> DMatrix<f64> {
     let k = phi.ncols();
-    product(leading(phi, k).transpose(), leading(phi, k))
+    inner(leading(phi, k), leading(phi, k))
 }
 
 /// The nearest orthonormal matrix `U Vᵀ` (with the rectangular identity
