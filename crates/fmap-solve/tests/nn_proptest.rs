@@ -1,0 +1,75 @@
+//! Every nearest-neighbour strategy against a naive f64 search on random
+//! point sets: sizes that do not fill the tiles' blocks, dimensions that
+//! do not fill their 32-coordinate steps, offsets and scales where bf16
+//! resolves little, duplicated rows, queries on or between rows, and
+//! guesses that are right, wrong or out of range.
+
+use fmaps_solve::{NnStrategy, nearest_rows_hinted_with, nearest_rows_with};
+use nalgebra::DMatrix;
+use proptest::prelude::*;
+
+fn naive(x: &DMatrix<f64>, q: &DMatrix<f64>) -> Vec<usize> {
+    (0..q.nrows())
+        .map(|i| {
+            let dist = |k: usize| (x.row(k) - q.row(i)).norm_squared();
+            (0..x.nrows())
+                .min_by(|&a, &b| dist(a).total_cmp(&dist(b)).then(a.cmp(&b)))
+                .unwrap()
+        })
+        .collect()
+}
+
+/// A deterministic stream of uniform values in [0, 1).
+fn stream(seed: u64) -> impl FnMut() -> f64 {
+    let mut s = seed | 1;
+    move || {
+        s = s
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        (s >> 11) as f64 / (1u64 << 53) as f64
+    }
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(48))]
+
+    #[test]
+    fn every_strategy_is_exact(
+        nx in 1usize..300,
+        nq in 1usize..200,
+        d in 1usize..80,
+        offset in prop_oneof![Just(0.0), Just(1.0), Just(-37.0), Just(1e4)],
+        scale in prop_oneof![Just(1.0), Just(1e-3), Just(1e6)],
+        seed in any::<u64>(),
+    ) {
+        let mut rnd = stream(seed);
+        let mut x = DMatrix::from_fn(nx, d, |_, _| offset + scale * (rnd() - 0.5));
+        if nx > 3 {
+            // A duplicated row: ties go to the smaller index.
+            let r = x.row(1).into_owned();
+            x.row_mut(nx - 1).copy_from(&r);
+        }
+        let q = DMatrix::from_fn(nq, d, |i, j| match i % 3 {
+            // On a row, near the midpoint of two rows (a hair off, so that
+            // the two distances differ by far more than f64 rounding and
+            // the naive search's summation order does not matter), or
+            // anywhere.
+            0 => x[(i % nx, j)],
+            1 => 0.5 * (x[(i % nx, j)] + x[((i * 7 + 1) % nx, j)]) + 1e-6 * scale * (rnd() - 0.5),
+            _ => offset + scale * (rnd() - 0.5),
+        });
+        let want = naive(&x, &q);
+        for strategy in [NnStrategy::Auto, NnStrategy::Brute, NnStrategy::Tree, NnStrategy::Prefix, NnStrategy::Tiles] {
+            prop_assert_eq!(&nearest_rows_with(&x, &q, strategy), &want, "{:?}", strategy);
+        }
+        let guesses: Vec<usize> = (0..nq).map(|i| match i % 4 {
+            0 => want[i],
+            1 => (want[i] + 1) % nx,
+            2 => nx + i,
+            _ => (i * 13) % nx,
+        }).collect();
+        for strategy in [NnStrategy::Auto, NnStrategy::Prefix, NnStrategy::Tiles] {
+            prop_assert_eq!(&nearest_rows_hinted_with(&x, &q, &guesses, strategy), &want, "{:?} with guesses", strategy);
+        }
+    }
+}
