@@ -1,6 +1,6 @@
 //! Times ZoomOut 50:150:5 and ICP on one FAUST pair, repeatedly, for
 //! profiling: `cargo run --release -p fmaps --example refine_profile --
-//! A.off B.off [zoomout|zoomout1|icp] [repeats]`.
+//! A.off B.off [zoomout|zoomout1|icp|fit] [repeats]`.
 use std::time::Instant;
 
 use fmaps::pipeline::{MatchParams, match_prepared, prepare};
@@ -15,6 +15,21 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let params = MatchParams::default();
     let (pa, pb) = (prepare(&ma, &params)?, prepare(&mb, &params)?);
     let init = match_prepared(&pa, &pb, &params)?;
+    if which == "fit" {
+        // The initial map alone (operators, solve, point map).
+        for _ in 0..reps {
+            let t = Instant::now();
+            let r = match_prepared(&pa, &pb, &params)?;
+            println!(
+                "fit {:.3} s (operators {:.3}, solve {:.3}, point map {:.3})",
+                t.elapsed().as_secs_f64(),
+                r.times.operators,
+                r.times.solve,
+                r.times.point_map
+            );
+        }
+        return Ok(());
+    }
     let refiner: Box<dyn Refiner> = match which {
         "icp" => Box::new(Icp::default()),
         "zoomout1" => Box::new(ZoomOut {
