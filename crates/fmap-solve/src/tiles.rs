@@ -111,7 +111,7 @@ mod imp {
     use super::{from_bf16, to_bf16};
     use crate::nn::{dist2_below, row_major};
 
-    /// Queries per tile row block (two tiles of 16 rows).
+    /// Queries per tile block (two tiles of 16 columns).
     const QT: usize = 32;
     /// Queries per parallel task: the data chunk in cache serves them all.
     const QB: usize = 128;
@@ -191,30 +191,20 @@ mod imp {
         }
     }
 
-    /// The data in the tiles' pair-interleaved layout: groups of 16 rows;
-    /// in a group, for each pair of coordinates (2p, 2p + 1), the 16 rows'
-    /// two bf16 values (64 bytes). Rows are padded to a multiple of 32.
-    struct Packed {
-        /// Padded dimension (a multiple of 32).
-        dp: usize,
-        bf: Vec<u16>,
-    }
-
-    impl Packed {
-        /// Start of group `g`.
-        fn group(&self, g: usize) -> *const u16 {
-            self.bf[g * self.dp * 16..].as_ptr()
-        }
-    }
-
     /// Everything a block of queries needs.
     struct Ctx {
         d: usize,
         nx: usize,
-        x: Packed,
+        /// Padded dimension (a multiple of 32).
+        dp: usize,
+        /// Data rows in bf16, in tiles: for each group of 16 rows and each
+        /// step of 32 coordinates, the 16 x 32 block row by row (1 KB,
+        /// contiguous); padded with zero rows to a multiple of 32.
+        xb: Vec<u16>,
         /// Data rows, f64 row-major, for the re-checks.
         x_rows: Vec<f64>,
-        /// |x|² in f32 (rounded), +inf on the padding rows.
+        /// |x|² in f32 (rounded), f32::MAX on the padding rows (never
+        /// candidates, never an overflow).
         xn32: Vec<f32>,
         /// Largest |x|².
         xn_max: f64,
@@ -235,28 +225,25 @@ mod imp {
         let dp = d.div_ceil(32) * 32;
         let nxp = nx.div_ceil(32) * 32;
         let (x_rows, q_rows) = rayon::join(|| row_major(data, None), || row_major(queries, None));
-        let mut bf = vec![0u16; nxp * dp];
+        let mut xb = vec![0u16; nxp * dp];
         let mut xn = vec![0.0f64; nx];
-        // Group by group (16 rows, in parallel), row by row: the bf16
-        // values go to their interleaved places in the group's block.
-        let in_range = bf
+        // Group by group of 16 rows (in parallel), row by row: bf16
+        // values to their tiles, and |x|².
+        let in_range = xb
             .par_chunks_mut(dp * 16)
             .zip(xn.par_chunks_mut(16))
             .enumerate()
             .map(|(g, (out, xn))| {
                 let mut ok = true;
-                let mut h = vec![0u16; dp];
                 for (rr, xn) in xn.iter_mut().enumerate() {
-                    let row = &x_rows[(g * 16 + rr) * d..(g * 16 + rr + 1) * d];
+                    let r = g * 16 + rr;
+                    let row = &x_rows[r * d..(r + 1) * d];
                     ok &= within_range(row);
-                    // The row in bf16 (a vectorised loop), then its pairs
-                    // to their places, 64 bytes apart.
-                    for (o, &v) in h.iter_mut().zip(row) {
-                        *o = to_bf16(v);
-                    }
-                    for (p, pair) in h.chunks_exact(2).enumerate() {
-                        out[p * 32 + rr * 2] = pair[0];
-                        out[p * 32 + rr * 2 + 1] = pair[1];
+                    for (kc, part) in row.chunks(32).enumerate() {
+                        let o = &mut out[kc * 512 + rr * 32..kc * 512 + rr * 32 + part.len()];
+                        for (h, &v) in o.iter_mut().zip(part) {
+                            *h = to_bf16(v);
+                        }
                     }
                     *xn = row.iter().map(|v| v * v).sum();
                 }
@@ -267,11 +254,12 @@ mod imp {
             return None;
         }
         let mut xn32: Vec<f32> = xn.iter().map(|&v| v as f32).collect();
-        xn32.resize(nxp, f32::INFINITY);
+        xn32.resize(nxp, f32::MAX);
         let ctx = Ctx {
             d,
             nx,
-            x: Packed { dp, bf },
+            dp,
+            xb,
             x_rows,
             xn32,
             xn_max: xn.iter().fold(0.0f64, |a, &b| a.max(b)),
@@ -282,7 +270,7 @@ mod imp {
             .map_init(
                 || Work {
                     q: vec![0u16; QB * dp],
-                    s: vec![0.0f32; QT * CHUNK],
+                    s: vec![0.0f32; CHUNK * QT],
                     cand: Vec::new(),
                 },
                 |work, &q0| {
@@ -318,11 +306,26 @@ mod imp {
 
     /// Per-thread buffers.
     struct Work {
-        /// A block's queries in bf16, row-major with the padded dimension.
+        /// A block's queries in bf16 in the tiles' pair layout: groups of
+        /// 16 queries; in a group, for each pair of coordinates (2p,
+        /// 2p + 1), the 16 queries' two values (64 bytes).
         q: Vec<u16>,
-        /// Scores of QT queries against a chunk (f32, one row per query).
+        /// Scores of a chunk of rows against QT queries (f32, one row of
+        /// QT per data row).
         s: Vec<f32>,
-        cand: Vec<u32>,
+        /// Candidates of a chunk: (query lane, row in the chunk).
+        cand: Vec<(u32, u32)>,
+    }
+
+    /// Per query lane of a tile block: the bound's factors, β and slack,
+    /// and |q|².
+    #[derive(Clone, Copy)]
+    struct Lane {
+        lo: f32,
+        hi: f32,
+        beta: f64,
+        slack: f64,
+        qn: f64,
     }
 
     /// The nearest rows of up to QB queries (`q_rows`, f64 row-major);
@@ -338,30 +341,39 @@ mod imp {
         hint: Option<&[usize]>,
         work: &mut Work,
     ) -> Option<Vec<usize>> {
-        let (d, dp, nx) = (ctx.d, ctx.x.dp, ctx.nx);
+        let (d, dp, nx) = (ctx.d, ctx.dp, ctx.nx);
         let rows = q_rows.len() / d;
         let u = f64::from(f32::EPSILON) / 2.0;
-        // Queries in bf16 (padding rows and columns zero) and per query
-        // |q|² and the bound on |computed score − true score|.
+        // Queries in bf16 (padding lanes and coordinates zero) and per
+        // query the bound on |computed score − true score|.
         work.q.iter_mut().for_each(|v| *v = 0);
-        let mut qn = vec![0.0f64; rows];
-        // The score's error bound α |x|² + β and the slack of the scans.
-        let mut bound = vec![(0.0f32, 0.0f32, 0.0f32); rows];
-        let mut slack = vec![0.0f64; rows];
+        let padding = Lane {
+            lo: 1.0,
+            hi: 1.0,
+            beta: 0.0,
+            slack: 0.0,
+            qn: 0.0,
+        };
+        let mut lanes = vec![padding; rows.div_ceil(QT) * QT];
         // Relative rounding of f64 -> f32 -> bf16 and the accumulation.
         let rho = (2.0f64).powi(-8) + (2.0f64).powi(-23);
         let gamma = 2.0 * dp as f64 * u;
+        let mut h = vec![0u16; dp];
         for i in 0..rows {
             let row = &q_rows[i * d..(i + 1) * d];
             if !within_range(row) {
                 return None;
             }
-            let out = &mut work.q[i * dp..i * dp + d];
-            for (o, &v) in out.iter_mut().zip(row) {
+            for (o, &v) in h.iter_mut().zip(row) {
                 *o = to_bf16(v);
             }
+            let group = &mut work.q[(i / 16) * dp * 16..(i / 16 + 1) * dp * 16];
+            for (p, pair) in h.chunks_exact(2).enumerate() {
+                group[p * 32 + (i % 16) * 2] = pair[0];
+                group[p * 32 + (i % 16) * 2 + 1] = pair[1];
+            }
             let (mut n2, mut r2) = ([0.0f64; 8], [0.0f64; 8]);
-            let (rc, oc) = (row.chunks_exact(8), out.chunks_exact(8));
+            let (rc, oc) = (row.chunks_exact(8), h[..d].chunks_exact(8));
             let (rest_v, rest_h) = (rc.remainder(), oc.remainder());
             for (vs, hs) in rc.zip(oc) {
                 for l in 0..8 {
@@ -370,8 +382,8 @@ mod imp {
                     r2[l] += (v - t) * (v - t);
                 }
             }
-            for (l, (&v, &h)) in rest_v.iter().zip(rest_h).enumerate() {
-                let t = from_bf16(h);
+            for (l, (&v, &hh)) in rest_v.iter().zip(rest_h).enumerate() {
+                let t = from_bf16(hh);
                 n2[l] += v * v;
                 r2[l] += (v - t) * (v - t);
             }
@@ -390,15 +402,20 @@ mod imp {
             let m = n2.sqrt().max(1e-150);
             let alpha = k / (2.0 * m) + 2.01 * u;
             let beta = k * m / 2.0 + flushed;
-            qn[i] = n2;
-            bound[i] = ((1.0 - alpha) as f32, (1.0 + alpha) as f32, beta as f32);
             // The f32 operations of the scans (the factors rounded, the
             // product, the subtraction): each off by at most u of a
             // magnitude below (1 + α)|x|² + 2|ĉ| + β.
             let e_max = alpha * ctx.xn_max + beta;
-            slack[i] =
-                8.0 * u * (2.0 * ctx.xn_max + 2.0 * qt * ctx.xn_max.sqrt() * (1.0 + rho) + e_max)
-                    + 1e-30;
+            lanes[i] = Lane {
+                lo: (1.0 - alpha) as f32,
+                hi: (1.0 + alpha) as f32,
+                beta,
+                slack: 8.0
+                    * u
+                    * (2.0 * ctx.xn_max + 2.0 * qt * ctx.xn_max.sqrt() * (1.0 + rho) + e_max)
+                    + 1e-30,
+                qn: n2,
+            };
         }
         // The best row so far per query (f64 distance, index).
         let mut best: Vec<(f64, usize)> = (0..rows)
@@ -417,53 +434,58 @@ mod imp {
         let nxp = ctx.xn32.len();
         for c0 in (0..nxp).step_by(CHUNK) {
             let width = CHUNK.min(nxp - c0);
+            let xn = &ctx.xn32[c0..c0 + width];
             for t0 in (0..rows).step_by(QT) {
+                let lane = &lanes[t0..t0 + QT];
                 // SAFETY: the tiles are configured; the query buffer holds
-                // QB rows of dp values, the packed data whole groups up to
-                // nxp rows, the score buffer QT x CHUNK.
+                // QB queries in groups of 16, the data nxp rows of dp
+                // values, the score buffer CHUNK x QT.
                 unsafe {
                     scores(
-                        work.q[t0 * dp..].as_ptr(),
+                        ctx.xb[c0 * dp..].as_ptr(),
                         dp,
-                        &ctx.x,
-                        c0 / 16,
-                        width / 32,
-                        work.s.as_mut_ptr(),
+                        work.q[t0 * dp..].as_ptr(),
                         width,
+                        work.s.as_mut_ptr(),
                     );
                 }
-                for i in t0..rows.min(t0 + QT) {
-                    let s = &work.s[(i - t0) * width..(i - t0 + 1) * width];
-                    let q = &q_rows[i * d..(i + 1) * d];
-                    let span = c0..c0 + width;
-                    let terms = Terms {
-                        xn: &ctx.xn32[span],
-                        s,
-                        lo: bound[i].0,
-                        hi: bound[i].1,
-                    };
-                    let beta = f64::from(bound[i].2);
-                    // A row can be nearer than `best` only if the lower
-                    // end of its score's interval is at most `bar`.
-                    let bar = best[i].0 * (1.0 + 1e-12) + 1e-12 * qn[i] - qn[i]
-                        + beta
-                        + slack[i]
-                        + 1e-300;
-                    // SAFETY: `available()` checked AVX-512F.
-                    let (lo, hi) = unsafe { terms.bounds() };
-                    if f64::from(lo) > bar {
-                        // No row of the chunk can be nearer.
+                let s = &work.s[..width * QT];
+                let (lo_f, hi_f): ([f32; QT], [f32; QT]) = (
+                    std::array::from_fn(|l| lane[l].lo),
+                    std::array::from_fn(|l| lane[l].hi),
+                );
+                // SAFETY: AVX-512F (checked by `available()`).
+                let (low, high) = unsafe { bounds(s, xn, &lo_f, &hi_f) };
+                // Per lane: a row can be nearer than `best` only if the
+                // lower end of its score's interval is at most the bar;
+                // and the chunk's nearest row's true score is at most the
+                // smallest upper end.
+                let mut bar = [f32::NEG_INFINITY; QT];
+                let mut any = false;
+                for l in 0..QT.min(rows - t0) {
+                    let (ln, b) = (lane[l], best[t0 + l].0);
+                    let over =
+                        b * (1.0 + 1e-12) + 1e-12 * ln.qn - ln.qn + ln.beta + ln.slack + 1e-300;
+                    if f64::from(low[l]) > over {
                         continue;
                     }
-                    // The chunk's nearest row's true score is at most
-                    // `hi` (the smallest upper end).
-                    let bar = bar.min(f64::from(hi) + 2.0 * beta + 2.0 * slack[i]);
-                    work.cand.clear();
-                    // SAFETY: as above.
-                    unsafe { terms.under(up32(bar), &mut work.cand) };
-                    for &p in &work.cand {
-                        consider(ctx, q, c0 + p as usize, &mut best[i]);
-                    }
+                    bar[l] = up32(over.min(f64::from(high[l]) + 2.0 * ln.beta + 2.0 * ln.slack));
+                    any = true;
+                }
+                if !any {
+                    continue;
+                }
+                work.cand.clear();
+                // SAFETY: as above.
+                unsafe { under(s, xn, &lo_f, &bar, &mut work.cand) };
+                for &(l, r) in &work.cand {
+                    let i = t0 + l as usize;
+                    consider(
+                        ctx,
+                        &q_rows[i * d..(i + 1) * d],
+                        c0 + r as usize,
+                        &mut best[i],
+                    );
                 }
             }
         }
@@ -491,31 +513,21 @@ mod imp {
         }
     }
 
-    /// `s[i][c] = q̃_i · x̃_(16 g0 + c)` for 32 queries (bf16 rows of `dp`
-    /// values from `q`) and `32 pairs` data rows from group `g0`, in f32;
-    /// `s` has rows of `stride` floats. Two by two tiles of 16 x 16
-    /// results, 32 coordinates per step.
+    /// `s[r][l] = x̃_r · q̃_l` for `width` data rows (in tiles from `x`,
+    /// see [`Ctx::xb`]) and 32 queries (two groups of 16 in the pair
+    /// layout from `q`), in f32, rows of 32 floats. Two by two tiles of 16
+    /// x 16 results, 32 coordinates per step.
     ///
     /// # Safety
-    /// The tiles must be configured (palette 1, 16 rows of 64 bytes); `q`
-    /// must hold 32 rows of `dp` values, `x` the groups `g0..g0 + 2
-    /// pairs`, `s` 32 rows of `stride >= 32 pairs` floats.
-    unsafe fn scores(
-        q: *const u16,
-        dp: usize,
-        x: &Packed,
-        g0: usize,
-        pairs: usize,
-        s: *mut f32,
-        stride: usize,
-    ) {
-        let qs = dp * 2;
-        let ss = stride * 4;
-        for g in 0..pairs {
-            let b0 = x.group(g0 + 2 * g);
-            let b1 = x.group(g0 + 2 * g + 1);
+    /// The tiles must be configured (palette 1, 16 rows of 64 bytes); `x`
+    /// must hold `width` (a multiple of 32) rows of `dp` values, `q` two
+    /// groups of `16 dp` values, `s` `width` rows of 32 floats.
+    unsafe fn scores(x: *const u16, dp: usize, q: *const u16, width: usize, s: *mut f32) {
+        for r in (0..width).step_by(32) {
+            let a0 = x.wrapping_add(r * dp);
+            let a1 = x.wrapping_add((r + 16) * dp);
             // SAFETY: the caller's contract; every load stays inside the
-            // query rows and the two groups, every store inside `s`.
+            // 32 rows and the two query groups, every store inside `s`.
             unsafe {
                 asm!(
                     "tilezero tmm0",
@@ -528,24 +540,23 @@ mod imp {
                     asm!(
                         // Loads interleaved with the products that
                         // wait for them (measured 10% faster).
-                        "tileloadd tmm4, [{a0} + {qs} * 1]",
+                        "tileloadd tmm4, [{a0} + {st} * 1]",
                         "tileloadd tmm6, [{b0} + {st} * 1]",
                         "tdpbf16ps tmm0, tmm4, tmm6",
                         "tileloadd tmm7, [{b1} + {st} * 1]",
                         "tdpbf16ps tmm1, tmm4, tmm7",
-                        "tileloadd tmm5, [{a1} + {qs} * 1]",
+                        "tileloadd tmm5, [{a1} + {st} * 1]",
                         "tdpbf16ps tmm2, tmm5, tmm6",
                         "tdpbf16ps tmm3, tmm5, tmm7",
-                        a0 = in(reg) q.add(kc * 32),
-                        a1 = in(reg) q.add(16 * dp + kc * 32),
-                        b0 = in(reg) b0.add(kc * 512),
-                        b1 = in(reg) b1.add(kc * 512),
-                        qs = in(reg) qs,
+                        a0 = in(reg) a0.add(kc * 512),
+                        a1 = in(reg) a1.add(kc * 512),
+                        b0 = in(reg) q.add(kc * 512),
+                        b1 = in(reg) q.add(16 * dp + kc * 512),
                         st = in(reg) 64usize,
                         options(nostack, readonly)
                     );
                 }
-                let c0 = s.add(g * 32);
+                let c0 = s.add(r * 32);
                 asm!(
                     "tilestored [{c0} + {ss} * 1], tmm0",
                     "tilestored [{c1} + {ss} * 1], tmm1",
@@ -553,93 +564,122 @@ mod imp {
                     "tilestored [{c3} + {ss} * 1], tmm3",
                     c0 = in(reg) c0,
                     c1 = in(reg) c0.add(16),
-                    c2 = in(reg) c0.add(16 * stride),
-                    c3 = in(reg) c0.add(16 * stride + 16),
-                    ss = in(reg) ss,
+                    c2 = in(reg) c0.add(16 * 32),
+                    c3 = in(reg) c0.add(16 * 32 + 16),
+                    ss = in(reg) 128usize,
                     options(nostack)
                 );
             }
         }
     }
 
-    /// One query's scores against a chunk: row k's true score lies in
-    /// `[lo xn[k] − 2 s[k] − β, hi xn[k] − 2 s[k] + β]` (up to the slack
-    /// of these f32 operations); β is left to the caller.
-    struct Terms<'a> {
-        xn: &'a [f32],
-        s: &'a [f32],
-        lo: f32,
-        hi: f32,
+    /// Per query lane, the smallest `lo xn[r] − 2 s[r][l]` and `hi xn[r] −
+    /// 2 s[r][l]` over the rows of a chunk (`s`: rows of 32 lanes).
+    ///
+    /// # Safety
+    /// The CPU must have AVX-512F.
+    #[target_feature(enable = "avx512f,fma")]
+    unsafe fn bounds(
+        s: &[f32],
+        xn: &[f32],
+        lo_f: &[f32; QT],
+        hi_f: &[f32; QT],
+    ) -> ([f32; QT], [f32; QT]) {
+        let n = xn.len().min(s.len() / QT);
+        // SAFETY: 16 lanes from 32-element arrays.
+        let (a, b) = unsafe {
+            (
+                [
+                    _mm512_loadu_ps(lo_f.as_ptr()),
+                    _mm512_loadu_ps(lo_f.as_ptr().add(16)),
+                ],
+                [
+                    _mm512_loadu_ps(hi_f.as_ptr()),
+                    _mm512_loadu_ps(hi_f.as_ptr().add(16)),
+                ],
+            )
+        };
+        // Two rows per step (independent chains).
+        let mut lo = [[_mm512_set1_ps(f32::INFINITY); 2]; 2];
+        let mut hi = [[_mm512_set1_ps(f32::INFINITY); 2]; 2];
+        let mut r = 0;
+        while r < n {
+            for (e, (lo, hi)) in lo.iter_mut().zip(hi.iter_mut()).enumerate() {
+                let k = r + e;
+                if k >= n {
+                    break;
+                }
+                let x = _mm512_set1_ps(xn[k]);
+                for h in 0..2 {
+                    // SAFETY: row k < n of 32 floats.
+                    let v = unsafe { _mm512_loadu_ps(s.as_ptr().add(k * QT + 16 * h)) };
+                    let v2 = _mm512_add_ps(v, v);
+                    lo[h] = _mm512_min_ps(lo[h], _mm512_fmsub_ps(a[h], x, v2));
+                    hi[h] = _mm512_min_ps(hi[h], _mm512_fmsub_ps(b[h], x, v2));
+                }
+            }
+            r += 2;
+        }
+        let mut low = [0.0f32; QT];
+        let mut high = [0.0f32; QT];
+        for h in 0..2 {
+            // SAFETY: 16 lanes into 32-element arrays.
+            unsafe {
+                _mm512_storeu_ps(
+                    low.as_mut_ptr().add(16 * h),
+                    _mm512_min_ps(lo[0][h], lo[1][h]),
+                );
+                _mm512_storeu_ps(
+                    high.as_mut_ptr().add(16 * h),
+                    _mm512_min_ps(hi[0][h], hi[1][h]),
+                );
+            }
+        }
+        (low, high)
     }
 
-    impl Terms<'_> {
-        /// The smallest `lo xn[k] − 2 s[k]` and `hi xn[k] − 2 s[k]` over the
-        /// chunk.
-        ///
-        /// # Safety
-        /// The CPU must have AVX-512F.
-        #[target_feature(enable = "avx512f,fma")]
-        unsafe fn bounds(&self) -> (f32, f32) {
-            let n = self.xn.len().min(self.s.len());
-            let (a, b) = (_mm512_set1_ps(self.lo), _mm512_set1_ps(self.hi));
-            let mut lo = [_mm512_set1_ps(f32::INFINITY); 2];
-            let mut hi = [_mm512_set1_ps(f32::INFINITY); 2];
-            let mut k = 0;
-            // Two independent chains.
-            while k + 32 <= n {
-                for c in 0..2 {
-                    // SAFETY: k + 16 c + 16 <= n for both slices.
-                    let (x, v) = unsafe {
-                        (
-                            _mm512_loadu_ps(self.xn.as_ptr().add(k + 16 * c)),
-                            _mm512_loadu_ps(self.s.as_ptr().add(k + 16 * c)),
-                        )
-                    };
-                    let v2 = _mm512_add_ps(v, v);
-                    lo[c] = _mm512_min_ps(lo[c], _mm512_fmsub_ps(a, x, v2));
-                    hi[c] = _mm512_min_ps(hi[c], _mm512_fmsub_ps(b, x, v2));
-                }
-                k += 32;
-            }
-            let mut low = _mm512_reduce_min_ps(_mm512_min_ps(lo[0], lo[1]));
-            let mut high = _mm512_reduce_min_ps(_mm512_min_ps(hi[0], hi[1]));
-            for j in k..n {
-                let v2 = self.s[j] + self.s[j];
-                low = low.min(self.lo.mul_add(self.xn[j], -v2));
-                high = high.min(self.hi.mul_add(self.xn[j], -v2));
-            }
-            (low, high)
-        }
-
-        /// Appends every k with `lo xn[k] − 2 s[k] <= bar` to `out`.
-        ///
-        /// # Safety
-        /// The CPU must have AVX-512F.
-        #[target_feature(enable = "avx512f,fma")]
-        unsafe fn under(&self, bar: f32, out: &mut Vec<u32>) {
-            let n = self.xn.len().min(self.s.len());
-            let a = _mm512_set1_ps(self.lo);
-            let b = _mm512_set1_ps(bar);
-            let mut k = 0;
-            while k + 16 <= n {
-                // SAFETY: k + 16 <= n for both slices.
-                let (x, v) = unsafe {
-                    (
-                        _mm512_loadu_ps(self.xn.as_ptr().add(k)),
-                        _mm512_loadu_ps(self.s.as_ptr().add(k)),
-                    )
-                };
-                let low = _mm512_fmsub_ps(a, x, _mm512_add_ps(v, v));
-                let mut mask = _mm512_cmp_ps_mask::<_CMP_LE_OQ>(low, b);
+    /// Appends every (lane, row) with `lo xn[r] − 2 s[r][l] <= bar[l]` to
+    /// `out`.
+    ///
+    /// # Safety
+    /// The CPU must have AVX-512F.
+    #[target_feature(enable = "avx512f,fma")]
+    unsafe fn under(
+        s: &[f32],
+        xn: &[f32],
+        lo_f: &[f32; QT],
+        bar: &[f32; QT],
+        out: &mut Vec<(u32, u32)>,
+    ) {
+        let n = xn.len().min(s.len() / QT);
+        // SAFETY: 16 lanes from 32-element arrays.
+        let (a, b) = unsafe {
+            (
+                [
+                    _mm512_loadu_ps(lo_f.as_ptr()),
+                    _mm512_loadu_ps(lo_f.as_ptr().add(16)),
+                ],
+                [
+                    _mm512_loadu_ps(bar.as_ptr()),
+                    _mm512_loadu_ps(bar.as_ptr().add(16)),
+                ],
+            )
+        };
+        // Only the halves (16 lanes) with a lane to search.
+        for h in (0..2).filter(|&h| {
+            bar[16 * h..16 * h + 16]
+                .iter()
+                .any(|&b| b > f32::NEG_INFINITY)
+        }) {
+            for r in 0..n {
+                let x = _mm512_set1_ps(xn[r]);
+                // SAFETY: row r < n of 32 floats.
+                let v = unsafe { _mm512_loadu_ps(s.as_ptr().add(r * QT + 16 * h)) };
+                let low = _mm512_fmsub_ps(a[h], x, _mm512_add_ps(v, v));
+                let mut mask = _mm512_cmp_ps_mask::<_CMP_LE_OQ>(low, b[h]);
                 while mask != 0 {
-                    out.push((k + mask.trailing_zeros() as usize) as u32);
+                    out.push(((16 * h) as u32 + mask.trailing_zeros(), r as u32));
                     mask &= mask - 1;
-                }
-                k += 16;
-            }
-            for j in k..n {
-                if self.lo.mul_add(self.xn[j], -(self.s[j] + self.s[j])) <= bar {
-                    out.push(j as u32);
                 }
             }
         }
