@@ -25,9 +25,13 @@
 //! coordinate rounding the same way) the bound is tight within 10%: a test
 //! fails with 0.9 times it.
 //!
-//! The kernel: 2 x 2 tiles of 16 x 16 f32 results (32 queries against 32
-//! rows), 32 coordinates per step, ~400 GMAC/s on one core here (the f32
-//! GEMM: ~60), the data packed once per search in the tiles' pair layout.
+//! The kernel: 2 x 2 tiles of 16 x 16 f32 results (32 data rows against
+//! 32 queries), 32 coordinates per step, ~400 GMAC/s on one core here (the
+//! f32 GEMM: ~60); the data packed once per search as 16 x 32 bf16 blocks,
+//! the queries per block of 128 in the tiles' pair layout. Scores come out
+//! one data row per 32 query lanes, so the scans (smallest lower and upper
+//! ends, then the candidates) run down the rows with no horizontal
+//! reductions.
 //!
 //! The tiles are used only where the CPU has them (AMX-TILE and AMX-BF16,
 //! enabled in XCR0) and Linux grants the process their state
