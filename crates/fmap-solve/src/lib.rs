@@ -45,7 +45,7 @@ pub use energy::{
 };
 pub use nn::{
     NnStrategy, PREFIX_DIM, PREFIX_MIN, nearest_rows, nearest_rows_hinted,
-    nearest_rows_hinted_with, nearest_rows_with, tiles_available,
+    nearest_rows_hinted_with, nearest_rows_in, nearest_rows_with, tiles_available,
 };
 pub use operators::{multiplication_operators, orientation_operators};
 pub use types::{FunctionalMap, PointMap};

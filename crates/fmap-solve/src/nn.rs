@@ -184,6 +184,133 @@ pub fn nearest_rows_hinted_with(
     search(data, queries, strategy, Some(hint))
 }
 
+/// [`nearest_rows_hinted_with`] on faer views of any layout (`hint`
+/// optional). Where the search runs on the matrix tiles, views whose rows
+/// are contiguous (column stride 1: row-major, or a leading block of a
+/// row-major matrix) are read in place; other layouts and strategies copy
+/// first. Same exact answer as every other entry point. Panics if the
+/// dimensions differ or `hint` is not one per query.
+#[track_caller]
+pub fn nearest_rows_in(
+    data: MatRef<'_, f64>,
+    queries: MatRef<'_, f64>,
+    hint: Option<&[usize]>,
+    strategy: NnStrategy,
+) -> Vec<usize> {
+    assert_eq!(
+        data.ncols(),
+        queries.ncols(),
+        "nearest_rows_in: dimensions differ"
+    );
+    if let Some(h) = hint {
+        assert_eq!(
+            h.len(),
+            queries.nrows(),
+            "nearest_rows_in: one hint per query"
+        );
+    }
+    let (nx, d) = (data.nrows(), data.ncols());
+    let tiles = match strategy {
+        NnStrategy::Tiles => true,
+        NnStrategy::Auto => d >= TILES_FROM && crate::tiles::available(),
+        _ => false,
+    };
+    if tiles
+        && nx > 0
+        && let Some(found) = crate::tiles::search_rows(Rows::of(data), Rows::of(queries), hint)
+    {
+        return found;
+    }
+    let copy = |m: MatRef<'_, f64>| DMatrix::from_fn(m.nrows(), m.ncols(), |i, j| m[(i, j)]);
+    let strategy = if strategy == NnStrategy::Tiles {
+        NnStrategy::Brute
+    } else {
+        strategy
+    };
+    search(&copy(data), &copy(queries), strategy, hint)
+}
+
+/// The rows of a matrix, each contiguous: read in place from a view whose
+/// column stride is 1, else copied row-major (in parallel).
+pub(crate) struct Rows<'a> {
+    ptr: *const f64,
+    stride: usize,
+    n: usize,
+    d: usize,
+    /// The copy, when one was made (`ptr` points into it).
+    _owned: Vec<f64>,
+    _view: std::marker::PhantomData<&'a f64>,
+}
+
+// SAFETY: `Rows` only reads, through a shared view or its own copy.
+unsafe impl Send for Rows<'_> {}
+// SAFETY: as above.
+unsafe impl Sync for Rows<'_> {}
+
+impl<'a> Rows<'a> {
+    pub(crate) fn of(m: MatRef<'a, f64>) -> Rows<'a> {
+        let (n, d) = (m.nrows(), m.ncols());
+        let rs = m.row_stride();
+        if n > 0 && d > 0 && m.col_stride() == 1 && rs >= d as isize {
+            return Rows {
+                ptr: m.as_ptr(),
+                stride: rs as usize,
+                n,
+                d,
+                _owned: Vec::new(),
+                _view: std::marker::PhantomData,
+            };
+        }
+        let mut owned = vec![0.0; n * d];
+        if d > 0 {
+            // Tiles of 8 rows (one cache line of each column when the
+            // columns are contiguous), in parallel over blocks of tiles.
+            let cols: Vec<Option<&[f64]>> = (0..d)
+                .map(|j| m.col(j).try_as_col_major().map(|c| c.as_slice()))
+                .collect();
+            owned
+                .par_chunks_mut(512 * d)
+                .enumerate()
+                .for_each(|(b, block)| {
+                    for (t, tile) in block.chunks_mut(8 * d).enumerate() {
+                        let i0 = b * 512 + t * 8;
+                        let rows = tile.len() / d;
+                        for (j, col) in cols.iter().enumerate() {
+                            for i in 0..rows {
+                                tile[i * d + j] = match col {
+                                    Some(c) => c[i0 + i],
+                                    None => m[(i0 + i, j)],
+                                };
+                            }
+                        }
+                    }
+                });
+        }
+        Rows {
+            ptr: owned.as_ptr(),
+            stride: d,
+            n,
+            d,
+            _owned: owned,
+            _view: std::marker::PhantomData,
+        }
+    }
+
+    /// Row count and length.
+    pub(crate) fn shape(&self) -> (usize, usize) {
+        (self.n, self.d)
+    }
+
+    /// Row `i`.
+    #[inline(always)]
+    pub(crate) fn row(&self, i: usize) -> &[f64] {
+        assert!(i < self.n, "row {i} of {}", self.n);
+        // SAFETY: row i's d elements are elements of the view (column
+        // stride 1) or of the copy, both alive for 'a / self.
+        unsafe { std::slice::from_raw_parts(self.ptr.add(i * self.stride), self.d) }
+    }
+}
+
 #[track_caller]
 fn search(
     data: &DMatrix<f64>,

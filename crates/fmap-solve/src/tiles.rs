@@ -39,7 +39,10 @@
 //! environment turns them off. Everything else falls back to the f32
 //! strategies.
 
+use faer::MatRef;
 use nalgebra::DMatrix;
+
+use crate::nn::Rows;
 
 /// Whether the matrix-tile search can run here (detected once).
 pub fn available() -> bool {
@@ -54,7 +57,23 @@ pub(crate) fn search(
     queries: &DMatrix<f64>,
     hint: Option<&[usize]>,
 ) -> Option<Vec<usize>> {
-    if !available() || data.ncols() == 0 || data.nrows() == 0 {
+    if !available() {
+        return None;
+    }
+    fn view(m: &DMatrix<f64>) -> MatRef<'_, f64> {
+        MatRef::from_column_major_slice(m.as_slice(), m.nrows(), m.ncols())
+    }
+    search_rows(Rows::of(view(data)), Rows::of(view(queries)), hint)
+}
+
+/// [`search`] on rows.
+pub(crate) fn search_rows(
+    data: Rows<'_>,
+    queries: Rows<'_>,
+    hint: Option<&[usize]>,
+) -> Option<Vec<usize>> {
+    let (nx, d) = data.shape();
+    if !available() || d == 0 || nx == 0 || queries.shape().1 != d {
         return None;
     }
     imp::search(data, queries, hint)
@@ -88,15 +107,13 @@ fn from_bf16(h: u16) -> f64 {
 
 #[cfg(not(all(target_arch = "x86_64", target_os = "linux")))]
 mod imp {
-    use nalgebra::DMatrix;
-
     pub fn available() -> bool {
         false
     }
 
     pub fn search(
-        _data: &DMatrix<f64>,
-        _queries: &DMatrix<f64>,
+        _data: crate::nn::Rows<'_>,
+        _queries: crate::nn::Rows<'_>,
         _hint: Option<&[usize]>,
     ) -> Option<Vec<usize>> {
         None
@@ -109,11 +126,10 @@ mod imp {
     use std::arch::x86_64::*;
     use std::sync::OnceLock;
 
-    use nalgebra::DMatrix;
     use rayon::prelude::*;
 
     use super::{from_bf16, to_bf16};
-    use crate::nn::{dist2_below, row_major};
+    use crate::nn::{Rows, dist2_below};
 
     /// Queries per tile block (two tiles of 16 columns).
     const QT: usize = 32;
@@ -196,7 +212,7 @@ mod imp {
     }
 
     /// Everything a block of queries needs.
-    struct Ctx {
+    struct Ctx<'a> {
         d: usize,
         nx: usize,
         /// Padded dimension (a multiple of 32).
@@ -205,8 +221,8 @@ mod imp {
         /// step of 32 coordinates, the 16 x 32 block row by row (1 KB,
         /// contiguous); padded with zero rows to a multiple of 32.
         xb: Vec<u16>,
-        /// Data rows, f64 row-major, for the re-checks.
-        x_rows: Vec<f64>,
+        /// Data rows (f64), for the re-checks.
+        x_rows: Rows<'a>,
         /// |x|² in f32 (rounded), f32::MAX on the padding rows (never
         /// candidates, never an overflow).
         xn32: Vec<f32>,
@@ -221,14 +237,13 @@ mod imp {
     }
 
     pub fn search(
-        data: &DMatrix<f64>,
-        queries: &DMatrix<f64>,
+        x_rows: Rows<'_>,
+        q_rows: Rows<'_>,
         hint: Option<&[usize]>,
     ) -> Option<Vec<usize>> {
-        let (nx, d, nq) = (data.nrows(), data.ncols(), queries.nrows());
+        let ((nx, d), nq) = (x_rows.shape(), q_rows.shape().0);
         let dp = d.div_ceil(32) * 32;
         let nxp = nx.div_ceil(32) * 32;
-        let (x_rows, q_rows) = rayon::join(|| row_major(data, None), || row_major(queries, None));
         let mut xb = vec![0u16; nxp * dp];
         let mut xn = vec![0.0f64; nx];
         // Group by group of 16 rows (in parallel), row by row: bf16
@@ -241,7 +256,7 @@ mod imp {
                 let mut ok = true;
                 for (rr, xn) in xn.iter_mut().enumerate() {
                     let r = g * 16 + rr;
-                    let row = &x_rows[r * d..(r + 1) * d];
+                    let row = x_rows.row(r);
                     ok &= within_range(row);
                     for (kc, part) in row.chunks(32).enumerate() {
                         let o = &mut out[kc * 512 + rr * 32..kc * 512 + rr * 32 + part.len()];
@@ -281,7 +296,7 @@ mod imp {
                     let rows = QB.min(nq - q0);
                     let hint = hint.map(|h| &h[q0..q0 + rows]);
                     // SAFETY: `available()` checked the tiles and AVX-512F.
-                    unsafe { block(&ctx, &q_rows[q0 * d..(q0 + rows) * d], hint, work) }
+                    unsafe { block(&ctx, &q_rows, q0, rows, hint, work) }
                 },
             )
             .collect();
@@ -340,13 +355,15 @@ mod imp {
     /// AVX-512F.
     #[target_feature(enable = "avx512f,avx512bw,avx512vl,avx2,fma")]
     unsafe fn block(
-        ctx: &Ctx,
-        q_rows: &[f64],
+        ctx: &Ctx<'_>,
+        q_rows: &Rows<'_>,
+        q0: usize,
+        rows: usize,
         hint: Option<&[usize]>,
         work: &mut Work,
     ) -> Option<Vec<usize>> {
         let (d, dp, nx) = (ctx.d, ctx.dp, ctx.nx);
-        let rows = q_rows.len() / d;
+        let q_row = |i: usize| q_rows.row(q0 + i);
         let u = f64::from(f32::EPSILON) / 2.0;
         // Queries in bf16 (padding lanes and coordinates zero) and per
         // query the bound on |computed score − true score|.
@@ -364,7 +381,7 @@ mod imp {
         let gamma = 2.0 * dp as f64 * u;
         let mut h = vec![0u16; dp];
         for i in 0..rows {
-            let row = &q_rows[i * d..(i + 1) * d];
+            let row = q_row(i);
             if !within_range(row) {
                 return None;
             }
@@ -424,7 +441,7 @@ mod imp {
         // The best row so far per query (f64 distance, index).
         let mut best: Vec<(f64, usize)> = (0..rows)
             .map(|i| {
-                let q = &q_rows[i * d..(i + 1) * d];
+                let q = q_row(i);
                 match hint.map(|h| h[i]) {
                     Some(h) if h < nx => (dist(ctx, q, h), h),
                     _ => (f64::INFINITY, usize::MAX),
@@ -484,12 +501,7 @@ mod imp {
                 unsafe { under(s, xn, &lo_f, &bar, &mut work.cand) };
                 for &(l, r) in &work.cand {
                     let i = t0 + l as usize;
-                    consider(
-                        ctx,
-                        &q_rows[i * d..(i + 1) * d],
-                        c0 + r as usize,
-                        &mut best[i],
-                    );
+                    consider(ctx, q_row(i), c0 + r as usize, &mut best[i]);
                 }
             }
         }
@@ -498,19 +510,17 @@ mod imp {
         Some(best.into_iter().map(|b| b.1).collect())
     }
 
-    fn dist(ctx: &Ctx, q: &[f64], r: usize) -> f64 {
-        let d = ctx.d;
-        dist2_below(&ctx.x_rows[r * d..(r + 1) * d], q, f64::INFINITY).unwrap_or(f64::NAN)
+    fn dist(ctx: &Ctx<'_>, q: &[f64], r: usize) -> f64 {
+        dist2_below(ctx.x_rows.row(r), q, f64::INFINITY).unwrap_or(f64::NAN)
     }
 
     /// Row `r` replaces `best` if nearer (ties: the smaller index).
     #[inline(always)]
-    fn consider(ctx: &Ctx, q: &[f64], r: usize, best: &mut (f64, usize)) {
+    fn consider(ctx: &Ctx<'_>, q: &[f64], r: usize, best: &mut (f64, usize)) {
         if r >= ctx.nx {
             return;
         }
-        let d = ctx.d;
-        if let Some(dk) = dist2_below(&ctx.x_rows[r * d..(r + 1) * d], q, best.0)
+        if let Some(dk) = dist2_below(ctx.x_rows.row(r), q, best.0)
             && (dk < best.0 || r < best.1)
         {
             *best = (dk, r);

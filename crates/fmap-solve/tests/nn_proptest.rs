@@ -4,7 +4,8 @@
 //! resolves little, duplicated rows, queries on or between rows, and
 //! guesses that are right, wrong or out of range.
 
-use fmaps_solve::{NnStrategy, nearest_rows_hinted_with, nearest_rows_with};
+use faer::MatRef;
+use fmaps_solve::{NnStrategy, nearest_rows_hinted_with, nearest_rows_in, nearest_rows_with};
 use nalgebra::DMatrix;
 use proptest::prelude::*;
 
@@ -70,6 +71,26 @@ proptest! {
         }).collect();
         for strategy in [NnStrategy::Auto, NnStrategy::Prefix, NnStrategy::Tiles] {
             prop_assert_eq!(&nearest_rows_hinted_with(&x, &q, &guesses, strategy), &want, "{:?} with guesses", strategy);
+        }
+        // Views: column-major, row-major, and the leading columns of a
+        // wider row-major matrix (rows read in place).
+        let wide = |m: &DMatrix<f64>, extra: usize| {
+            let w = m.ncols() + extra;
+            let mut v = vec![f64::NAN; m.nrows() * w];
+            for i in 0..m.nrows() {
+                for j in 0..m.ncols() {
+                    v[i * w + j] = m[(i, j)];
+                }
+            }
+            (v, w)
+        };
+        let ((xw, wx), (qw, wq)) = (wide(&x, 3), wide(&q, 0));
+        let xv = MatRef::from_row_major_slice_with_stride(&xw, nx, d, wx);
+        let qv = MatRef::from_row_major_slice_with_stride(&qw, nq, d, wq);
+        let xc = MatRef::from_column_major_slice(x.as_slice(), nx, d);
+        for strategy in [NnStrategy::Auto, NnStrategy::Brute, NnStrategy::Tiles] {
+            prop_assert_eq!(&nearest_rows_in(xv, qv, None, strategy), &want, "{:?} on row views", strategy);
+            prop_assert_eq!(&nearest_rows_in(xc, qv, Some(&guesses), strategy), &want, "{:?} on mixed views", strategy);
         }
     }
 }
