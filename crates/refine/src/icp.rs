@@ -5,7 +5,7 @@ use std::time::Instant;
 use fmaps_eigensolve::SpectralBasis;
 use nalgebra::DMatrix;
 
-use crate::linalg::{nearest_orthonormal, point_map, pullback};
+use crate::linalg::{Rows, nearest_orthonormal, point_map, pullback};
 use crate::{Error, Iteration, RefineReport, Refined, Refiner, Result, check_k, count_changed};
 use fmaps_solve::NnStrategy;
 
@@ -55,7 +55,11 @@ impl Refiner for Icp {
         }
         check_k(basis_a, "A", ka)?;
         check_k(basis_b, "B", kb)?;
-        let (phi_a, phi_b) = (&basis_a.eigenvectors, &basis_b.eigenvectors);
+        let (phi_a, phi_b) = rayon::join(
+            || Rows::of(&basis_a.eigenvectors, ka, None),
+            || Rows::of(&basis_b.eigenvectors, kb, None),
+        );
+        let (phi_a, phi_b) = (&phi_a, &phi_b);
         let mass_b = basis_b.mass.as_slice();
         let mut report = RefineReport {
             method: self.name(),

@@ -1,17 +1,57 @@
 //! Dense kernels shared by the refiners: the two point-map conversions on
 //! (possibly sub-sampled) bases and the pull-back of a point map, as faer
-//! GEMMs on views of the column-major eigenvector matrices.
+//! GEMMs on row-major copies of the eigenvector matrices (made once per
+//! refinement: the nearest-neighbour search reads their rows in place, and
+//! the pull-back gathers whole rows).
 
 use faer::linalg::matmul::matmul;
 use faer::{Accum, Mat, MatMut, MatRef, Par};
-use fmaps_solve::{NnStrategy, nearest_rows, nearest_rows_hinted_with};
+use fmaps_solve::{NnStrategy, nearest_rows_in};
 use nalgebra::DMatrix;
 use rayon::prelude::*;
 
-/// The first `k` columns of a column-major matrix as a faer view.
-pub(crate) fn leading(m: &DMatrix<f64>, k: usize) -> MatRef<'_, f64> {
-    let n = m.nrows();
-    MatRef::from_column_major_slice(&m.as_slice()[..n * k], n, k)
+/// The first `k` eigenvectors of a basis (or of some of its vertices),
+/// row-major: row i holds vertex i's k coordinates.
+pub(crate) struct Rows {
+    v: Vec<f64>,
+    n: usize,
+    k: usize,
+}
+
+impl Rows {
+    /// The first `k` columns of `m`, the rows `rows` (all when `None`).
+    pub(crate) fn of(m: &DMatrix<f64>, k: usize, rows: Option<&[usize]>) -> Rows {
+        let n = rows.map_or(m.nrows(), <[usize]>::len);
+        let mut v = vec![0.0; n * k];
+        if k > 0 {
+            v.par_chunks_mut(64 * k).enumerate().for_each(|(b, block)| {
+                for (t, row) in block.chunks_exact_mut(k).enumerate() {
+                    let i = b * 64 + t;
+                    let src = rows.map_or(i, |r| r[i]);
+                    for (j, x) in row.iter_mut().enumerate() {
+                        *x = m[(src, j)];
+                    }
+                }
+            });
+        }
+        Rows { v, n, k }
+    }
+
+    /// Row count.
+    pub(crate) fn n(&self) -> usize {
+        self.n
+    }
+
+    /// The first `k` columns as a faer view (rows contiguous).
+    pub(crate) fn view(&self, k: usize) -> MatRef<'_, f64> {
+        assert!(k <= self.k, "{k} columns of {}", self.k);
+        MatRef::from_row_major_slice_with_stride(&self.v, self.n, k, self.k.max(1))
+    }
+
+    /// The first `k` coordinates of row `i`.
+    fn row(&self, i: usize, k: usize) -> &[f64] {
+        &self.v[i * self.k..i * self.k + k]
+    }
 }
 
 /// Rows per partial product of [`inner`].
@@ -43,12 +83,12 @@ fn inner(a: MatRef<'_, f64>, b: MatRef<'_, f64>) -> DMatrix<f64> {
     DMatrix::from_fn(p, q, |i, j| parts.iter().map(|m| m[(i, j)]).sum())
 }
 
-/// `a · b` (or with `b` transposed) into a new nalgebra matrix.
-fn product(a: MatRef<'_, f64>, b: MatRef<'_, f64>) -> DMatrix<f64> {
-    let mut out = DMatrix::<f64>::zeros(a.nrows(), b.ncols());
-    let (r, c) = out.shape();
+/// `a · b` into a new row-major n x q buffer.
+fn product_rows(a: MatRef<'_, f64>, b: MatRef<'_, f64>) -> Vec<f64> {
+    let (n, q) = (a.nrows(), b.ncols());
+    let mut out = vec![0.0; n * q];
     matmul(
-        MatMut::from_column_major_slice_mut(out.as_mut_slice(), r, c),
+        MatMut::from_row_major_slice_mut(&mut out, n, q),
         Accum::Replace,
         a,
         b,
@@ -65,92 +105,82 @@ fn product(a: MatRef<'_, f64>, b: MatRef<'_, f64>) -> DMatrix<f64> {
 /// only, never the result.
 pub(crate) fn point_map(
     c_ab: &DMatrix<f64>,
-    phi_a: &DMatrix<f64>,
-    phi_b: &DMatrix<f64>,
+    phi_a: &Rows,
+    phi_b: &Rows,
     adjoint: bool,
     hint: Option<&[usize]>,
     strategy: NnStrategy,
 ) -> Vec<usize> {
     let (kb, ka) = c_ab.shape();
     let c = MatRef::from_column_major_slice(c_ab.as_slice(), kb, ka);
-    let (data, queries) = if adjoint {
-        (
-            copy(leading(phi_a, ka)),
-            product(leading(phi_b, kb), c), // n_B x k_A
-        )
+    // One guess per query (a vertex of B) or none.
+    let hint = hint.filter(|h| h.len() == phi_b.n());
+    if adjoint {
+        // n_B x k_A
+        let queries = product_rows(phi_b.view(kb), c);
+        let queries = MatRef::from_row_major_slice(&queries, phi_b.n(), ka);
+        nearest_rows_in(phi_a.view(ka), queries, hint, strategy)
     } else {
-        (
-            product(leading(phi_a, ka), c.transpose()), // n_A x k_B
-            copy(leading(phi_b, kb)),
-        )
-    };
-    match hint {
-        Some(h) if h.len() == queries.nrows() => {
-            nearest_rows_hinted_with(&data, &queries, h, strategy)
-        }
-        _ => nearest_rows(&data, &queries),
+        // n_A x k_B
+        let data = product_rows(phi_a.view(ka), c.transpose());
+        let data = MatRef::from_row_major_slice(&data, phi_a.n(), kb);
+        nearest_rows_in(data, phi_b.view(kb), hint, strategy)
     }
 }
 
-fn copy(m: MatRef<'_, f64>) -> DMatrix<f64> {
-    columns(m.nrows(), m.ncols(), |j, col| {
-        for (i, v) in col.iter_mut().enumerate() {
-            *v = m[(i, j)];
-        }
-    })
-}
-
-/// An n x k matrix filled column by column, in parallel.
-fn columns(n: usize, k: usize, fill: impl Fn(usize, &mut [f64]) + Sync) -> DMatrix<f64> {
-    let mut out = vec![0.0; n * k];
-    if n > 0 {
-        out.par_chunks_mut(n)
+/// `w[y] Φ_A(T(y), :ka)` (`w` = 1 without weights), row-major n_B x ka.
+fn gathered(t_ba: &[usize], phi_a: &Rows, ka: usize, w: Option<&[f64]>) -> Vec<f64> {
+    let mut out = vec![0.0; t_ba.len() * ka];
+    if ka > 0 {
+        out.par_chunks_mut(64 * ka)
             .enumerate()
-            .for_each(|(j, col)| fill(j, col));
+            .for_each(|(b, block)| {
+                for (t, row) in block.chunks_exact_mut(ka).enumerate() {
+                    let y = b * 64 + t;
+                    let scale = w.map_or(1.0, |w| w[y]);
+                    for (x, &v) in row.iter_mut().zip(phi_a.row(t_ba[y], ka)) {
+                        *x = v * scale;
+                    }
+                }
+            });
     }
-    DMatrix::from_vec(n, k, out)
-}
-
-/// `w[y] Φ_A(T(y), j)` for the first `ka` columns (`w` = 1 without
-/// weights), n_B x ka.
-fn gathered(t_ba: &[usize], phi_a: &DMatrix<f64>, ka: usize, w: Option<&[f64]>) -> DMatrix<f64> {
-    columns(t_ba.len(), ka, |j, col| {
-        let src = phi_a.column(j);
-        for (y, v) in col.iter_mut().enumerate() {
-            *v = src[t_ba[y]] * w.map_or(1.0, |w| w[y]);
-        }
-    })
+    out
 }
 
 /// `C_AB = Φ_Bᵀ M_B Π_BA Φ_A` on the first `ka`/`kb` columns (k_B x k_A).
 pub(crate) fn pullback(
     t_ba: &[usize],
-    phi_a: &DMatrix<f64>,
+    phi_a: &Rows,
     ka: usize,
-    phi_b: &DMatrix<f64>,
+    phi_b: &Rows,
     kb: usize,
     mass_b: &[f64],
 ) -> DMatrix<f64> {
-    let weighted = gathered(t_ba, phi_a, ka, Some(mass_b));
-    inner(leading(phi_b, kb), leading(&weighted, ka))
+    let w = gathered(t_ba, phi_a, ka, Some(mass_b));
+    inner(
+        phi_b.view(kb),
+        MatRef::from_row_major_slice(&w, t_ba.len(), ka),
+    )
 }
 
 /// `Φ_B[:, :kb]ᵀ Y` for the least-squares pull-back on samples.
 pub(crate) fn gather_rhs(
     t_ba: &[usize],
-    phi_a: &DMatrix<f64>,
+    phi_a: &Rows,
     ka: usize,
-    phi_b: &DMatrix<f64>,
+    phi_b: &Rows,
     kb: usize,
 ) -> DMatrix<f64> {
-    let rows = gathered(t_ba, phi_a, ka, None);
-    inner(leading(phi_b, kb), leading(&rows, ka))
+    let y = gathered(t_ba, phi_a, ka, None);
+    inner(
+        phi_b.view(kb),
+        MatRef::from_row_major_slice(&y, t_ba.len(), ka),
+    )
 }
 
-/// `Φᵀ Φ` (k x k).
-pub(crate) fn gram(phi: &DMatrix<f64>) -> DMatrix<f64> {
-    let k = phi.ncols();
-    inner(leading(phi, k), leading(phi, k))
+/// `Φᵀ Φ` (k x k) of the first `k` columns.
+pub(crate) fn gram(phi: &Rows, k: usize) -> DMatrix<f64> {
+    inner(phi.view(k), phi.view(k))
 }
 
 /// The nearest orthonormal matrix `U Vᵀ` (with the rectangular identity

@@ -5,7 +5,7 @@ use std::time::Instant;
 use fmaps_eigensolve::SpectralBasis;
 use nalgebra::DMatrix;
 
-use crate::linalg::{gather_rhs, gram, point_map, pullback};
+use crate::linalg::{Rows, gather_rhs, gram, point_map, pullback};
 use crate::{Error, Iteration, RefineReport, Refined, Refiner, Result, check_k, count_changed};
 use fmaps_solve::NnStrategy;
 
@@ -128,7 +128,7 @@ impl ZoomOut {
 /// One shape's rows for the iterations: all vertices with the mass, or
 /// samples with the Gram matrix of their basis rows.
 struct Side {
-    phi: DMatrix<f64>,
+    phi: Rows,
     fit: Fit,
 }
 
@@ -141,12 +141,12 @@ impl Side {
     fn new(basis: &SpectralBasis, rows: Option<&[usize]>, k: usize) -> Side {
         match rows {
             None => Side {
-                phi: basis.eigenvectors.columns(0, k).into_owned(),
+                phi: Rows::of(&basis.eigenvectors, k, None),
                 fit: Fit::Mass(basis.mass.as_slice().to_vec()),
             },
             Some(rows) => {
-                let phi = DMatrix::from_fn(rows.len(), k, |i, j| basis.eigenvectors[(rows[i], j)]);
-                let g = gram(&phi);
+                let phi = Rows::of(&basis.eigenvectors, k, Some(rows));
+                let g = gram(&phi, k);
                 Side {
                     phi,
                     fit: Fit::Gram(g),
@@ -174,7 +174,7 @@ fn fit(
                 .into_owned()
                 .cholesky()
                 .ok_or(Error::SingularSample {
-                    samples: this.phi.nrows(),
+                    samples: this.phi.n(),
                     k: k_this,
                 })?;
             Ok(chol.solve(&rhs))
@@ -217,10 +217,7 @@ impl Refiner for ZoomOut {
             nn_seconds: 0.0,
             seconds: 0.0,
         };
-        let mut nn = |c: &DMatrix<f64>,
-                      data: &DMatrix<f64>,
-                      queries: &DMatrix<f64>,
-                      hint: Option<&[usize]>| {
+        let mut nn = |c: &DMatrix<f64>, data: &Rows, queries: &Rows, hint: Option<&[usize]>| {
             let t = Instant::now();
             let map = point_map(c, data, queries, self.adjoint, hint, NnStrategy::Auto);
             report.nn_searches += 1;
@@ -253,7 +250,11 @@ impl Refiner for ZoomOut {
         }
         // The output: the final C converted on all vertices.
         let t_ba = if sub.is_some() {
-            nn(&c, &basis_a.eigenvectors, &basis_b.eigenvectors, None)
+            let (all_a, all_b) = rayon::join(
+                || Rows::of(&basis_a.eigenvectors, kf, None),
+                || Rows::of(&basis_b.eigenvectors, kf, None),
+            );
+            nn(&c, &all_a, &all_b, None)
         } else {
             nn(&c, &side_a.phi, &side_b.phi, prev.as_deref())
         };
