@@ -220,7 +220,7 @@ mod imp {
         /// Data rows in bf16, in tiles: for each group of 16 rows and each
         /// step of 32 coordinates, the 16 x 32 block row by row (1 KB,
         /// contiguous); padded with zero rows to a multiple of 32.
-        xb: Vec<u16>,
+        xb: Aligned<u16>,
         /// Data rows (f64), for the re-checks.
         x_rows: Rows<'a>,
         /// |x|² in f32 (rounded), f32::MAX on the padding rows (never
@@ -228,6 +228,38 @@ mod imp {
         xn32: Vec<f32>,
         /// Largest |x|².
         xn_max: f64,
+    }
+
+    /// A zeroed buffer whose first element is 64-byte aligned, so that no
+    /// tile row or 16-float line straddles two cache lines (measured: the
+    /// score stores took 12% of ZoomOut's time from a 4-byte aligned
+    /// buffer).
+    struct Aligned<T> {
+        buf: Vec<T>,
+        off: usize,
+        len: usize,
+    }
+
+    impl<T: Copy + Default> Aligned<T> {
+        fn zeroed(len: usize) -> Aligned<T> {
+            let size = std::mem::size_of::<T>();
+            let buf = vec![T::default(); len + 64 / size];
+            let off = ((64 - buf.as_ptr() as usize % 64) % 64) / size;
+            Aligned { buf, off, len }
+        }
+    }
+
+    impl<T> std::ops::Deref for Aligned<T> {
+        type Target = [T];
+        fn deref(&self) -> &[T] {
+            &self.buf[self.off..self.off + self.len]
+        }
+    }
+
+    impl<T> std::ops::DerefMut for Aligned<T> {
+        fn deref_mut(&mut self) -> &mut [T] {
+            &mut self.buf[self.off..self.off + self.len]
+        }
     }
 
     /// `v` rounded up to f32.
@@ -244,7 +276,7 @@ mod imp {
         let ((nx, d), nq) = (x_rows.shape(), q_rows.shape().0);
         let dp = d.div_ceil(32) * 32;
         let nxp = nx.div_ceil(32) * 32;
-        let mut xb = vec![0u16; nxp * dp];
+        let mut xb = Aligned::<u16>::zeroed(nxp * dp);
         let mut xn = vec![0.0f64; nx];
         // Group by group of 16 rows (in parallel), row by row: bf16
         // values to their tiles, and |x|².
@@ -288,8 +320,8 @@ mod imp {
             .par_iter()
             .map_init(
                 || Work {
-                    q: vec![0u16; QB * dp],
-                    s: vec![0.0f32; CHUNK * QT],
+                    q: Aligned::zeroed(QB * dp),
+                    s: Aligned::zeroed(CHUNK * QT),
                     cand: Vec::new(),
                 },
                 |work, &q0| {
@@ -328,10 +360,10 @@ mod imp {
         /// A block's queries in bf16 in the tiles' pair layout: groups of
         /// 16 queries; in a group, for each pair of coordinates (2p,
         /// 2p + 1), the 16 queries' two values (64 bytes).
-        q: Vec<u16>,
+        q: Aligned<u16>,
         /// Scores of a chunk of rows against QT queries (f32, one row of
         /// QT per data row).
-        s: Vec<f32>,
+        s: Aligned<f32>,
         /// Candidates of a chunk: (query lane, row in the chunk).
         cand: Vec<(u32, u32)>,
     }
