@@ -50,7 +50,7 @@ pub fn available() -> bool {
 }
 
 /// The exact nearest rows, ranked on the tiles; `None` when they are not
-/// available or the values are not all finite and below 1e15 in magnitude
+/// available or a row is not finite with a norm below 1e14
 /// (where the bf16 products could overflow).
 pub(crate) fn search(
     data: &DMatrix<f64>,
@@ -289,7 +289,6 @@ mod imp {
                 for (rr, xn) in xn.iter_mut().enumerate() {
                     let r = g * 16 + rr;
                     let row = x_rows.row(r);
-                    ok &= within_range(row);
                     for (kc, part) in row.chunks(32).enumerate() {
                         let o = &mut out[kc * 512 + rr * 32..kc * 512 + rr * 32 + part.len()];
                         for (h, &v) in o.iter_mut().zip(part) {
@@ -297,6 +296,7 @@ mod imp {
                         }
                     }
                     *xn = row.iter().map(|v| v * v).sum();
+                    ok &= within_range(*xn);
                 }
                 ok
             })
@@ -339,20 +339,13 @@ mod imp {
         Some(out)
     }
 
-    /// Whether every value is finite and below 1e15 in magnitude (then no
-    /// bf16 product or f32 sum of them overflows).
+    /// Whether a row whose squared norm was computed as `norm2` has every
+    /// value finite and below 1e14 in magnitude (then no bf16 product or
+    /// f32 sum of such values overflows): a NaN or an infinity makes the
+    /// sum NaN or infinite, and each |v| is at most the norm.
     #[inline(always)]
-    fn within_range(v: &[f64]) -> bool {
-        // A NaN fails the comparison too. Eight lanes (vectorised).
-        let mut ok = [true; 8];
-        let chunks = v.chunks_exact(8);
-        let rest = chunks.remainder();
-        for c in chunks {
-            for l in 0..8 {
-                ok[l] &= c[l].abs() < 1e15;
-            }
-        }
-        ok.iter().all(|&o| o) && rest.iter().all(|x| x.abs() < 1e15)
+    fn within_range(norm2: f64) -> bool {
+        norm2 < 1e28
     }
 
     /// Per-thread buffers.
@@ -414,9 +407,6 @@ mod imp {
         let mut h = vec![0u16; dp];
         for i in 0..rows {
             let row = q_row(i);
-            if !within_range(row) {
-                return None;
-            }
             for (o, &v) in h.iter_mut().zip(row) {
                 *o = to_bf16(v);
             }
@@ -442,6 +432,9 @@ mod imp {
             }
             let sum = |a: [f64; 8]| a.iter().sum::<f64>();
             let (n2, rq) = (sum(n2), sum(r2).sqrt());
+            if !within_range(n2) {
+                return None;
+            }
             let qt = (n2.sqrt() + rq) * (1.0 + 1e-15);
             // |s − t| <= K |x| + 2.01 u |x|² (module docs), and
             // |x| <= (|x|²/m + m)/2 for any m > 0; m = |q|, near which the
