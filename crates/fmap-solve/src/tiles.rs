@@ -612,6 +612,22 @@ mod imp {
         }
     }
 
+    /// The 32 lanes as two vectors.
+    ///
+    /// # Safety
+    /// The CPU must have AVX-512F.
+    #[inline]
+    #[target_feature(enable = "avx512f")]
+    unsafe fn lanes(v: &[f32; QT]) -> [__m512; 2] {
+        // SAFETY: two loads of 16 from a 32-element array.
+        unsafe {
+            [
+                _mm512_loadu_ps(v.as_ptr()),
+                _mm512_loadu_ps(v.as_ptr().add(16)),
+            ]
+        }
+    }
+
     /// Per query lane, the smallest `lo xn[r] − 2 s[r][l]` and `hi xn[r] −
     /// 2 s[r][l]` over the rows of a chunk (`s`: rows of 32 lanes).
     ///
@@ -625,19 +641,8 @@ mod imp {
         hi_f: &[f32; QT],
     ) -> ([f32; QT], [f32; QT]) {
         let n = xn.len().min(s.len() / QT);
-        // SAFETY: 16 lanes from 32-element arrays.
-        let (a, b) = unsafe {
-            (
-                [
-                    _mm512_loadu_ps(lo_f.as_ptr()),
-                    _mm512_loadu_ps(lo_f.as_ptr().add(16)),
-                ],
-                [
-                    _mm512_loadu_ps(hi_f.as_ptr()),
-                    _mm512_loadu_ps(hi_f.as_ptr().add(16)),
-                ],
-            )
-        };
+        // SAFETY: the caller's AVX-512F.
+        let (a, b) = unsafe { (lanes(lo_f), lanes(hi_f)) };
         // Two rows per step (independent chains).
         let mut lo = [[_mm512_set1_ps(f32::INFINITY); 2]; 2];
         let mut hi = [[_mm512_set1_ps(f32::INFINITY); 2]; 2];
@@ -691,19 +696,8 @@ mod imp {
         out: &mut Vec<(u32, u32)>,
     ) {
         let n = xn.len().min(s.len() / QT);
-        // SAFETY: 16 lanes from 32-element arrays.
-        let (a, b) = unsafe {
-            (
-                [
-                    _mm512_loadu_ps(lo_f.as_ptr()),
-                    _mm512_loadu_ps(lo_f.as_ptr().add(16)),
-                ],
-                [
-                    _mm512_loadu_ps(bar.as_ptr()),
-                    _mm512_loadu_ps(bar.as_ptr().add(16)),
-                ],
-            )
-        };
+        // SAFETY: the caller's AVX-512F.
+        let (a, b) = unsafe { (lanes(lo_f), lanes(bar)) };
         // Only the halves (16 lanes) with a lane to search.
         for h in (0..2).filter(|&h| {
             bar[16 * h..16 * h + 16]

@@ -180,6 +180,19 @@ fn prefix_search_equals_brute_force_whatever_the_guesses() {
     }
 }
 
+/// The nearest row of each query by direct f64 distances (ties: the
+/// smaller index).
+fn naive_nearest(x: &DMatrix<f64>, q: &DMatrix<f64>) -> Vec<usize> {
+    (0..q.nrows())
+        .map(|i| {
+            let dist = |k: usize| (x.row(k) - q.row(i)).norm_squared();
+            (0..x.nrows())
+                .min_by(|&a, &b| dist(a).total_cmp(&dist(b)).then(a.cmp(&b)))
+                .unwrap()
+        })
+        .collect()
+}
+
 /// The tile search where bf16 resolves nothing (rows 1e-3 apart on a
 /// common offset of 1e3: the bf16 step there is 4) and where its products
 /// could overflow (1e16, handed to brute force): the exact answer.
@@ -194,13 +207,7 @@ fn tiles_exact_where_bf16_is_coarse_or_out_of_range() {
             offset + spread * (((i * 53 + j * 7) % 97) as f64 - 48.5)
         });
         let got = nearest_rows_with(&x, &q, NnStrategy::Tiles);
-        for (i, &g) in got.iter().enumerate() {
-            let dist = |k: usize| (x.row(k) - q.row(i)).norm_squared();
-            let best = (0..nx)
-                .min_by(|&a, &b| dist(a).total_cmp(&dist(b)).then(a.cmp(&b)))
-                .unwrap();
-            assert_eq!(g, best, "offset {offset}, query {i}");
-        }
+        assert_eq!(got, naive_nearest(&x, &q), "offset {offset}");
     }
     // Near ties: each query a hair off the midpoint of two random rows in
     // [0.5, 1.5]^d (bf16 steps of 2⁻⁸..2⁻⁷ there), so that the two
@@ -219,18 +226,12 @@ fn tiles_exact_where_bf16_is_coarse_or_out_of_range() {
         0.5 * (x[(a, j)] + x[(b, j)]) + 1e-7 * (rnd() - 0.5)
     });
     let got = nearest_rows_with(&x, &q, NnStrategy::Tiles);
-    for (i, &g) in got.iter().enumerate() {
-        let dist = |k: usize| (x.row(k) - q.row(i)).norm_squared();
-        let best = (0..nx)
-            .min_by(|&a, &b| dist(a).total_cmp(&dist(b)).then(a.cmp(&b)))
-            .unwrap();
-        assert_eq!(g, best, "near tie, query {i}");
-    }
+    assert_eq!(got, naive_nearest(&x, &q), "near ties");
     // The worst case of the bound: every coordinate of the query (1 +
     // 0.99·2⁻⁸) and of row 5 (1 + 0.98·2⁻⁸) rounds down to 1, so row 5's
     // score is computed too high by nearly the whole bound; row 9 (1 −
     // 0.4·2⁻⁸, also 1 in bf16, smaller norm) ranks first and is farther.
-    // A bound half as large misses row 5.
+    // A bound 0.9 times as large misses row 5.
     let h = 2f64.powi(-8);
     let mut x = DMatrix::from_fn(64, d, |_, _| 2.0 + rnd());
     x.row_mut(5).fill(1.0 + 0.98 * h);
