@@ -261,31 +261,7 @@ impl<'a> Rows<'a> {
                 _view: std::marker::PhantomData,
             };
         }
-        let mut owned = vec![0.0; n * d];
-        if d > 0 {
-            // Tiles of 8 rows (one cache line of each column when the
-            // columns are contiguous), in parallel over blocks of tiles.
-            let cols: Vec<Option<&[f64]>> = (0..d)
-                .map(|j| m.col(j).try_as_col_major().map(|c| c.as_slice()))
-                .collect();
-            owned
-                .par_chunks_mut(512 * d)
-                .enumerate()
-                .for_each(|(b, block)| {
-                    for (t, tile) in block.chunks_mut(8 * d).enumerate() {
-                        let i0 = b * 512 + t * 8;
-                        let rows = tile.len() / d;
-                        for (j, col) in cols.iter().enumerate() {
-                            for i in 0..rows {
-                                tile[i * d + j] = match col {
-                                    Some(c) => c[i0 + i],
-                                    None => m[(i0 + i, j)],
-                                };
-                            }
-                        }
-                    }
-                });
-        }
+        let owned = rows_of(m);
         Rows {
             ptr: owned.as_ptr(),
             stride: d,
@@ -793,26 +769,7 @@ const UNION_DENSITY: usize = 8;
 /// keep both the column reads and the row writes in cache.
 pub(crate) fn row_major(m: &DMatrix<f64>, order: Option<&[usize]>) -> Vec<f64> {
     let (n, d) = m.shape();
-    let mut t = vec![0.0; n * d];
-    if d == 0 {
-        return t;
-    }
-    // Tiles of 8 rows (one cache line of each column; the tile stays in
-    // L1), in parallel over blocks of tiles.
-    let cols = m.as_slice();
-    t.par_chunks_mut(512 * d)
-        .enumerate()
-        .for_each(|(b, block)| {
-            for (s, tile) in block.chunks_mut(8 * d).enumerate() {
-                let i0 = b * 512 + s * 8;
-                let rows = tile.len() / d;
-                for j in 0..d {
-                    for (i, v) in cols[j * n + i0..j * n + i0 + rows].iter().enumerate() {
-                        tile[i * d + j] = *v;
-                    }
-                }
-            }
-        });
+    let t = rows_of(MatRef::from_column_major_slice(m.as_slice(), n, d));
     match order {
         None => t,
         Some(order) => {
@@ -823,6 +780,43 @@ pub(crate) fn row_major(m: &DMatrix<f64>, order: Option<&[usize]>) -> Vec<f64> {
             out
         }
     }
+}
+
+/// The rows of a view, copied row-major: tiles of 8 rows (one cache line
+/// of each column when the columns are contiguous; the tile stays in L1),
+/// in parallel over blocks of tiles.
+fn rows_of(m: MatRef<'_, f64>) -> Vec<f64> {
+    let (n, d) = (m.nrows(), m.ncols());
+    let mut out = vec![0.0; n * d];
+    if d == 0 {
+        return out;
+    }
+    let cols: Vec<Option<&[f64]>> = (0..d)
+        .map(|j| m.col(j).try_as_col_major().map(|c| c.as_slice()))
+        .collect();
+    out.par_chunks_mut(512 * d)
+        .enumerate()
+        .for_each(|(b, block)| {
+            for (t, tile) in block.chunks_mut(8 * d).enumerate() {
+                let i0 = b * 512 + t * 8;
+                let rows = tile.len() / d;
+                for (j, col) in cols.iter().enumerate() {
+                    match col {
+                        Some(c) => {
+                            for (i, v) in c[i0..i0 + rows].iter().enumerate() {
+                                tile[i * d + j] = *v;
+                            }
+                        }
+                        None => {
+                            for i in 0..rows {
+                                tile[i * d + j] = m[(i0 + i, j)];
+                            }
+                        }
+                    }
+                }
+            }
+        });
+    out
 }
 
 /// Points per leaf of the bisection that orders both sets.
