@@ -24,12 +24,15 @@ impl Rows {
         let n = rows.map_or(m.nrows(), <[usize]>::len);
         let mut v = vec![0.0; n * k];
         if k > 0 {
-            v.par_chunks_mut(64 * k).enumerate().for_each(|(b, block)| {
-                for (t, row) in block.chunks_exact_mut(k).enumerate() {
-                    let i = b * 64 + t;
-                    let src = rows.map_or(i, |r| r[i]);
-                    for (j, x) in row.iter_mut().enumerate() {
-                        *x = m[(src, j)];
+            // Blocks of 8 rows, column by column (contiguous reads of each
+            // column for consecutive rows), in parallel.
+            v.par_chunks_mut(8 * k).enumerate().for_each(|(b, block)| {
+                let i0 = b * 8;
+                for j in 0..k {
+                    let col = m.column(j);
+                    let col = col.as_slice();
+                    for (t, row) in block.chunks_exact_mut(k).enumerate() {
+                        row[j] = col[rows.map_or(i0 + t, |r| r[i0 + t])];
                     }
                 }
             });
