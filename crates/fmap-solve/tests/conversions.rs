@@ -65,7 +65,7 @@ fn nearest_rows_matches_a_naive_search() {
             .wrapping_add(1442695040888963407);
         ((s >> 11) as f64 / (1u64 << 53) as f64) - 0.5
     };
-    for d in [1, 3, 17, 33, 64] {
+    for d in [1, 3, 17, 33, 64, 150, 257] {
         let nx = 700;
         let mut x = DMatrix::from_fn(nx, d, |_, _| rnd());
         // Row 5 duplicates row 2: a tie resolved to the smaller index.
