@@ -5,7 +5,7 @@ use fmaps_solve::*;
 use nalgebra::DMatrix;
 
 mod common;
-use common::basis;
+use common::{basis, naive_nearest};
 
 fn bumpy() -> TriMesh {
     common::bumpy(24, 14)
@@ -178,19 +178,6 @@ fn prefix_search_equals_brute_force_whatever_the_guesses() {
         let own = nearest_rows_with(&x, &x, NnStrategy::Prefix);
         assert!(own.iter().enumerate().all(|(i, &j)| i == j), "k = {k}");
     }
-}
-
-/// The nearest row of each query by direct f64 distances (ties: the
-/// smaller index).
-fn naive_nearest(x: &DMatrix<f64>, q: &DMatrix<f64>) -> Vec<usize> {
-    (0..q.nrows())
-        .map(|i| {
-            let dist = |k: usize| (x.row(k) - q.row(i)).norm_squared();
-            (0..x.nrows())
-                .min_by(|&a, &b| dist(a).total_cmp(&dist(b)).then(a.cmp(&b)))
-                .unwrap()
-        })
-        .collect()
 }
 
 /// The tile search where bf16 resolves nothing (rows 1e-3 apart on a

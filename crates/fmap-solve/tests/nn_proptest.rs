@@ -4,21 +4,12 @@
 //! resolves little, duplicated rows, queries on or between rows, and
 //! guesses that are right, wrong or out of range.
 
+mod common;
+use common::naive_nearest;
 use faer::MatRef;
 use fmaps_solve::{NnStrategy, nearest_rows_hinted_with, nearest_rows_in, nearest_rows_with};
 use nalgebra::DMatrix;
 use proptest::prelude::*;
-
-fn naive(x: &DMatrix<f64>, q: &DMatrix<f64>) -> Vec<usize> {
-    (0..q.nrows())
-        .map(|i| {
-            let dist = |k: usize| (x.row(k) - q.row(i)).norm_squared();
-            (0..x.nrows())
-                .min_by(|&a, &b| dist(a).total_cmp(&dist(b)).then(a.cmp(&b)))
-                .unwrap()
-        })
-        .collect()
-}
 
 /// A deterministic stream of uniform values in [0, 1).
 fn stream(seed: u64) -> impl FnMut() -> f64 {
@@ -59,7 +50,7 @@ proptest! {
             1 => 0.5 * (x[(i % nx, j)] + x[((i * 7 + 1) % nx, j)]) + 1e-6 * scale * (rnd() - 0.5),
             _ => offset + scale * (rnd() - 0.5),
         });
-        let want = naive(&x, &q);
+        let want = naive_nearest(&x, &q);
         for strategy in [NnStrategy::Auto, NnStrategy::Brute, NnStrategy::Tree, NnStrategy::Prefix, NnStrategy::Tiles] {
             prop_assert_eq!(&nearest_rows_with(&x, &q, strategy), &want, "{:?}", strategy);
         }
