@@ -74,6 +74,43 @@ pub fn multiplication_operator(phi: &DMatrix<f64>, mass: &DVector<f64>, d: &[f64
     phi.tr_mul(&w)
 }
 
+/// How [`FmapEnergy::minimize_with_report`] found the minimum.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[non_exhaustive]
+pub enum SolveMethod {
+    /// No operator terms: one small system per row of C.
+    Rows,
+    /// Conjugate gradients in f64 preconditioned by an f32 Cholesky factor
+    /// of the normal matrix.
+    Iterative,
+    /// Dense f64 Cholesky of the normal matrix (the fallback when the
+    /// iterative method does not converge).
+    Dense,
+}
+
+/// How the minimum of an energy was found.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SolveReport {
+    /// The method.
+    pub method: SolveMethod,
+    /// Conjugate-gradient iterations (0 for the direct methods).
+    pub iterations: usize,
+    /// For the iterative method, the final relative residual
+    /// `‖b − H x‖ / ‖b‖` of the normal equations over the free entries of
+    /// C (recomputed from x).
+    pub residual: Option<f64>,
+}
+
+impl SolveReport {
+    fn direct(method: SolveMethod) -> SolveReport {
+        SolveReport {
+            method,
+            iterations: 0,
+            residual: None,
+        }
+    }
+}
+
 /// Pairs of operators (on A: k_A x k_A, on B: k_B x k_B).
 pub type OperatorPairs = Vec<(DMatrix<f64>, DMatrix<f64>)>;
 
@@ -173,7 +210,7 @@ impl FmapEnergy {
         Ok((ka, kb))
     }
 
-    fn op_terms(&self) -> impl Iterator<Item = (f64, &(DMatrix<f64>, DMatrix<f64>))> {
+    pub(crate) fn op_terms(&self) -> impl Iterator<Item = (f64, &(DMatrix<f64>, DMatrix<f64>))> {
         let d = self.ops.iter().map(|p| (self.w_dcomm, p));
         let o = self.orient_ops.iter().map(|p| (self.w_orient, p));
         d.chain(o).filter(|(w, _)| *w != 0.0)
@@ -220,9 +257,58 @@ impl FmapEnergy {
 
     /// The exact minimizer of the energy (k_B x k_A). Without operator
     /// terms each row is an independent k_A x k_A system; otherwise the
-    /// normal equations in vec(C) (size k_A·k_B) are assembled with GEMMs
-    /// and solved by Cholesky.
+    /// normal equations in vec(C) (size k_A·k_B) are solved by conjugate
+    /// gradients in f64, preconditioned by a Cholesky factor of the normal
+    /// matrix computed in f32, to a residual at rounding level (1e-14 of
+    /// the right-hand side), and if that fails (a singular or very badly
+    /// conditioned problem) as [`minimize_dense`](Self::minimize_dense)
+    /// does.
     pub fn minimize(&self) -> Result<DMatrix<f64>> {
+        self.minimize_with_report().map(|(c, _)| c)
+    }
+
+    /// [`minimize`](Self::minimize), with how the minimum was found.
+    pub fn minimize_with_report(&self) -> Result<(DMatrix<f64>, SolveReport)> {
+        let (ka, kb) = self.dims()?;
+        let j0 = usize::from(self.fixed_first_column.is_some());
+        if self.op_terms().next().is_none() || ka == j0 {
+            let c = self.minimize_dense()?;
+            return Ok((c, SolveReport::direct(SolveMethod::Rows)));
+        }
+        let normal = crate::normal::Normal::new(self, ka, kb, j0);
+        let mut c = Mat::<f64>::zeros(kb, ka);
+        if let Some(c0) = &self.fixed_first_column {
+            for (i, v) in c0.iter().enumerate() {
+                c[(i, 0)] = *v;
+            }
+        }
+        let fixed = self.fixed_first_column.as_ref().map(|_| c.as_ref());
+        let b = normal.rhs(self, fixed);
+        if let Some((x, iterations, residual)) = normal.solve(&b) {
+            let mut out = DMatrix::zeros(kb, ka);
+            if let Some(c0) = &self.fixed_first_column {
+                out.column_mut(0).copy_from(c0);
+            }
+            out.as_mut_slice()[j0 * kb..].copy_from_slice(&x);
+            let report = SolveReport {
+                method: SolveMethod::Iterative,
+                iterations,
+                residual: Some(residual),
+            };
+            return Ok((out, report));
+        }
+        let c = self.minimize_dense()?;
+        Ok((c, SolveReport::direct(SolveMethod::Dense)))
+    }
+
+    /// The exact minimizer by a direct solve in f64: without operator
+    /// terms each row is an independent k_A x k_A system; otherwise the
+    /// normal equations in vec(C) (size k_A·k_B) are assembled with GEMMs
+    /// and solved by Cholesky (with a growing ridge on singular problems,
+    /// see the crate docs). Slower than [`minimize`](Self::minimize) with
+    /// operator terms (twice the factorization time and memory); the
+    /// reference it is tested against.
+    pub fn minimize_dense(&self) -> Result<DMatrix<f64>> {
         let (ka, kb) = self.dims()?;
         let aat = &self.descr_a * self.descr_a.transpose();
         let bat = &self.descr_b * self.descr_a.transpose();
@@ -240,24 +326,7 @@ impl FmapEnergy {
         // vec(C) is column-major: index (i, j) -> i + kb * j. Only the
         // lower triangle of H is formed (the factorization reads no more).
         let m = ka * kb;
-        let build = |h: &mut Mat<f64>| {
-            h.fill(0.0);
-            // w_descr (A Aᵀ ⊗ I) + w_lap diag(vec mask).
-            for l in 0..ka {
-                for j in l..ka {
-                    let v = self.w_descr * aat[(j, l)];
-                    for i in 0..kb {
-                        h[(i + kb * j, i + kb * l)] += v;
-                    }
-                }
-            }
-            for j in 0..ka {
-                for i in 0..kb {
-                    h[(i + kb * j, i + kb * j)] += self.w_lap * self.lap_mask[(i, j)];
-                }
-            }
-            self.add_operator_hessian(h, ka, kb);
-        };
+        let build = |h: &mut Mat<f64>| self.fill_normal_matrix(h, &aat, ka, kb);
         let mut h = Mat::<f64>::zeros(m, m);
         build(&mut h);
         let mut rhs: Vec<f64> = (0..m)
@@ -277,6 +346,34 @@ impl FmapEnergy {
         }
         c.as_mut_slice()[free..].copy_from_slice(&x);
         Ok(c)
+    }
+
+    /// The lower triangle of the normal matrix H (k_A·k_B square, vec(C)
+    /// column-major) into `h`, with `aat = A Aᵀ`; the strict upper
+    /// triangle is left zero.
+    pub(crate) fn fill_normal_matrix(
+        &self,
+        h: &mut Mat<f64>,
+        aat: &DMatrix<f64>,
+        ka: usize,
+        kb: usize,
+    ) {
+        h.fill(0.0);
+        // w_descr (A Aᵀ ⊗ I) + w_lap diag(vec mask).
+        for l in 0..ka {
+            for j in l..ka {
+                let v = self.w_descr * aat[(j, l)];
+                for i in 0..kb {
+                    h[(i + kb * j, i + kb * l)] += v;
+                }
+            }
+        }
+        for j in 0..ka {
+            for i in 0..kb {
+                h[(i + kb * j, i + kb * j)] += self.w_lap * self.lap_mask[(i, j)];
+            }
+        }
+        self.add_operator_hessian(h, ka, kb);
     }
 
     fn minimize_rows(

@@ -32,7 +32,9 @@
 
 mod energy;
 mod nn;
+mod normal;
 mod operators;
+mod simd;
 mod tiles;
 mod types;
 mod weights;
@@ -41,7 +43,8 @@ use fmaps_eigensolve::SpectralBasis;
 use nalgebra::DMatrix;
 
 pub use energy::{
-    FmapEnergy, OperatorPairs, laplacian_mask, multiplication_operator, resolvent_mask,
+    FmapEnergy, OperatorPairs, SolveMethod, SolveReport, laplacian_mask, multiplication_operator,
+    resolvent_mask,
 };
 pub use nn::{
     NnStrategy, PREFIX_DIM, PREFIX_MIN, nearest_rows, nearest_rows_hinted,
