@@ -209,6 +209,45 @@ pub struct SpectralBasis {
     pub report: SolveReport,
 }
 
+/// `Aᵀ diag(w) B` (A n x k, B n x d, w of length n) by one GEMM (faer,
+/// parallel in the current rayon pool when large): the M-weighted inner
+/// products of the columns, e.g. the projection `Φᵀ M F` of functions onto
+/// a basis.
+///
+/// # Panics
+/// If the row counts differ.
+#[track_caller]
+pub fn weighted_tr_mul(a: &DMatrix<f64>, w: &DVector<f64>, b: &DMatrix<f64>) -> DMatrix<f64> {
+    use faer::linalg::matmul::matmul;
+    let (n, k, d) = (a.nrows(), a.ncols(), b.ncols());
+    assert!(
+        b.nrows() == n && w.len() == n,
+        "weighted_tr_mul: {} rows, {} weights, {} rows",
+        n,
+        w.len(),
+        b.nrows()
+    );
+    let mut wb = b.clone();
+    for mut col in wb.column_iter_mut() {
+        col.component_mul_assign(w);
+    }
+    let mut out = DMatrix::zeros(k, d);
+    let par = if n * k * d >= 1 << 20 {
+        faer::Par::rayon(0)
+    } else {
+        faer::Par::Seq
+    };
+    matmul(
+        faer::MatMut::from_column_major_slice_mut(out.as_mut_slice(), k, d),
+        faer::Accum::Replace,
+        faer::MatRef::from_column_major_slice(a.as_slice(), n, k).transpose(),
+        faer::MatRef::from_column_major_slice(wb.as_slice(), n, d),
+        1.0,
+        par,
+    );
+    out
+}
+
 impl SpectralBasis {
     /// Number of vertices n.
     pub fn n(&self) -> usize {
@@ -233,11 +272,7 @@ impl SpectralBasis {
             f.nrows(),
             self.n()
         );
-        let mut mf = f.clone();
-        for mut col in mf.column_iter_mut() {
-            col.component_mul_assign(&self.mass);
-        }
-        self.eigenvectors.tr_mul(&mf)
+        weighted_tr_mul(&self.eigenvectors, &self.mass, f)
     }
 
     /// Functions from spectral coefficients: `F = Φ A` (n x d for A k x d).
@@ -263,7 +298,12 @@ impl SpectralBasis {
         report.residuals.truncate(k);
         SpectralBasis {
             eigenvalues: self.eigenvalues.rows(0, k).into_owned(),
-            eigenvectors: self.eigenvectors.columns(0, k).into_owned(),
+            // The leading columns of a column-major matrix are contiguous.
+            eigenvectors: DMatrix::from_column_slice(
+                self.n(),
+                k,
+                &self.eigenvectors.as_slice()[..self.n() * k],
+            ),
             mass: self.mass.clone(),
             report,
         }

@@ -65,6 +65,14 @@ pub(crate) struct Normal {
     xs: Mat<f64>,
     /// `[√w_1 Y_1; …; √w_p Y_p]` (k_B·p x k_B).
     ys: Mat<f64>,
+    /// `[√w_1 Y_1; …; √w_p Y_p; √w_1 Y_1ᵀ; …; √w_p Y_pᵀ]` (2p·k_B x k_B).
+    ys2: Mat<f64>,
+    /// `[√w_1 X_1ᵀ; …; √w_p X_pᵀ; √w_1 X_1; …; √w_p X_p]` (2p·k_A x k_A).
+    xs2: Mat<f64>,
+    /// `K = w_descr A Aᵀ + Σ_q w_q X_q X_qᵀ` (k_A x k_A).
+    kx: Mat<f64>,
+    /// `K_Y = Σ_q w_q Y_qᵀ Y_q` (k_B x k_B).
+    kyy: Mat<f64>,
     /// Added to the diagonal of H: 1e-13 of its largest free diagonal
     /// entry (as the dense path's first ridge).
     ridge: f64,
@@ -106,6 +114,22 @@ impl Normal {
         } else {
             Par::Seq
         };
+        let ys2 = Mat::from_fn(2 * p * kb, kb, |t, r| {
+            let (q, i) = (t / kb, t % kb);
+            if q < p {
+                ys[(q * kb + i, r)]
+            } else {
+                ys[((q - p) * kb + r, i)]
+            }
+        });
+        let xs2 = Mat::from_fn(2 * p * ka, ka, |t, l| {
+            let (q, j) = (t / ka, t % ka);
+            if q < p {
+                xs[(l, q * ka + j)]
+            } else {
+                xs[(j, (q - p) * ka + l)]
+            }
+        });
         let mut n = Normal {
             ka,
             kb,
@@ -115,9 +139,14 @@ impl Normal {
             mask,
             xs,
             ys,
+            ys2,
+            xs2,
+            kx: Mat::zeros(0, 0),
+            kyy: Mat::zeros(0, 0),
             ridge: 0.0,
             par,
         };
+        (n.kx, n.kyy) = n.kronecker_factors();
         n.ridge = 1e-13 * n.max_free_diagonal();
         n
     }
@@ -153,7 +182,7 @@ impl Normal {
     /// The largest diagonal entry of H over the free unknowns (0 if none).
     fn max_free_diagonal(&self) -> f64 {
         let (ka, kb) = (self.ka, self.kb);
-        let (kx, kyy) = self.kronecker_factors();
+        let (kx, kyy) = (&self.kx, &self.kyy);
         let mut m = 0.0f64;
         for l in self.j0..ka {
             for r in 0..kb {
@@ -166,48 +195,36 @@ impl Normal {
         m
     }
 
-    /// `H C` for a full k_B x k_A matrix C (the ridge included).
+    /// `H C` for a full k_B x k_A matrix C (the ridge included), as
+    /// `C K + K_Y C + (mask + ridge) ∘ C − Σ_q w_q (Y_q C X_qᵀ + Y_qᵀ C X_q)`
+    /// (K and K_Y the Kronecker factors): the cross terms are two GEMMs of
+    /// the stacked operators with one reshuffle of blocks between them.
     pub(crate) fn apply(&self, c: MatRef<'_, f64>) -> Mat<f64> {
-        let (ka, kb, p, par) = (self.ka, self.kb, self.p, self.par);
+        let (ka, kb, p) = (self.ka, self.kb, self.p);
+        let par = Par::Seq;
         let mut out =
             Mat::<f64>::from_fn(kb, ka, |i, j| (self.mask[(i, j)] + self.ridge) * c[(i, j)]);
-        matmul(out.as_mut(), Accum::Add, c, self.aat.as_ref(), 1.0, par);
-        // t1 = C [X_1 … X_p] (k_B x k_A·p), t2 = [Y_1; …; Y_p] C.
-        let mut t1 = Mat::<f64>::zeros(kb, ka * p);
-        matmul(t1.as_mut(), Accum::Replace, c, self.xs.as_ref(), 1.0, par);
-        let mut t2 = Mat::<f64>::zeros(kb * p, ka);
-        matmul(t2.as_mut(), Accum::Replace, self.ys.as_ref(), c, 1.0, par);
-        // R_q = C X_q − Y_q C, side by side (t1) and stacked (t2).
-        for q in 0..p {
-            for j in 0..ka {
-                let col = t1.col_mut(q * ka + j).try_as_col_major_mut().unwrap();
-                let src = &t2.col(j).try_as_col_major().unwrap().as_slice()[q * kb..(q + 1) * kb];
-                for (d, s) in col.as_slice_mut().iter_mut().zip(src) {
-                    *d -= s;
-                }
+        matmul(out.as_mut(), Accum::Add, c, self.kx.as_ref(), 1.0, par);
+        matmul(out.as_mut(), Accum::Add, self.kyy.as_ref(), c, 1.0, par);
+        // v = [Y_1; …; Y_p; Y_1ᵀ; …; Y_pᵀ] C (2p·k_B x k_A), blocks stacked;
+        // vh = the same blocks side by side (k_B x 2p·k_A).
+        let mut v = Mat::<f64>::zeros(2 * p * kb, ka);
+        matmul(v.as_mut(), Accum::Replace, self.ys2.as_ref(), c, 1.0, par);
+        let mut vh = Mat::<f64>::zeros(kb, 2 * p * ka);
+        for j in 0..ka {
+            let src = v.col(j).try_as_col_major().unwrap().as_slice();
+            for q in 0..2 * p {
+                let dst = vh.col_mut(q * ka + j).try_as_col_major_mut().unwrap();
+                dst.as_slice_mut()
+                    .copy_from_slice(&src[q * kb..(q + 1) * kb]);
             }
         }
-        for q in 0..p {
-            for j in 0..ka {
-                let src = t1.col(q * ka + j).try_as_col_major().unwrap().as_slice();
-                let dst = t2.col_mut(j).try_as_col_major_mut().unwrap();
-                dst.as_slice_mut()[q * kb..(q + 1) * kb].copy_from_slice(src);
-            }
-        }
-        // + Σ R_q X_qᵀ − Σ Y_qᵀ R_q.
+        // − Σ_q (Y_q C) X_qᵀ + (Y_qᵀ C) X_q.
         matmul(
             out.as_mut(),
             Accum::Add,
-            t1.as_ref(),
-            self.xs.transpose(),
-            1.0,
-            par,
-        );
-        matmul(
-            out.as_mut(),
-            Accum::Add,
-            self.ys.transpose(),
-            t2.as_ref(),
+            vh.as_ref(),
+            self.xs2.as_ref(),
             -1.0,
             par,
         );
@@ -239,7 +256,7 @@ impl Normal {
         let (ka, kb, j0, p) = (self.ka, self.kb, self.j0, self.p);
         let n = self.n();
         assert_eq!(h.len(), n * n);
-        let (kx, kyy) = self.kronecker_factors();
+        let (kx, kyy) = (&self.kx, &self.kyy);
         // yw[(i + kb r), q] = √w Y_q[i, r], yw[(i + kb r), p + q] = √w Y_q[r, i].
         let mut yw = Mat::<f32>::zeros(kb * kb, 2 * p);
         for q in 0..p {
@@ -373,17 +390,24 @@ impl Normal {
         }
         let (mut buf, off) = self.assembled_f32();
         let mut l = MatMut::from_column_major_slice_mut(&mut buf[off..off + n * n], n, n);
+        // Blocks of 512 columns when parallel (1.5x on two threads at
+        // n = 2450, against 1.4x with faer's default of 128).
+        let params: faer::Spec<factor::LltParams, f32> = match self.par {
+            Par::Seq => Default::default(),
+            _ => faer::Spec::new(factor::LltParams {
+                block_size: 512,
+                ..faer::Auto::<f32>::auto()
+            }),
+        };
         let mut mem = MemBuffer::new(factor::cholesky_in_place_scratch::<f32>(
-            n,
-            self.par,
-            Default::default(),
+            n, self.par, params,
         ));
         factor::cholesky_in_place(
             l.rb_mut(),
             Default::default(),
             self.par,
             MemStack::new(&mut mem),
-            Default::default(),
+            params,
         )
         .ok()?;
         let l = l.as_ref();
@@ -408,7 +432,7 @@ fn precondition(l: MatRef<'_, f32>, r: &[f64]) -> Vec<f64> {
 }
 
 /// Preconditioned conjugate gradients (flexible: the f32 preconditioner
-/// is symmetric only to rounding) for `A x = b`, from `x = P b`. Stops at a
+/// is symmetric only to rounding) for `A x = b`, from `x = 0`. Stops at a
 /// relative residual of [`TOL`], or when the residual has not halved in
 /// four iterations, accepting it then if below [`ACCEPT`]. The residual is
 /// recomputed from x before returning: (x, iterations, ‖b − A x‖ / ‖b‖).
@@ -418,9 +442,9 @@ fn pcg(
     b: &[f64],
     bn: f64,
 ) -> Option<(Vec<f64>, usize, f64)> {
-    let mut x = precond(b);
-    let ax = apply(&x);
-    let mut r: Vec<f64> = b.iter().zip(&ax).map(|(b, a)| b - a).collect();
+    // From x = 0: the first step is the best multiple of P b.
+    let mut x = vec![0.0; b.len()];
+    let mut r = b.to_vec();
     let mut z = precond(&r);
     let mut d = z.clone();
     let mut rz = dot(&r, &z);
@@ -573,7 +597,7 @@ mod tests {
             let e = energy(ka, kb, fixed);
             let (c, report) = e.minimize_with_report().unwrap();
             assert_eq!(report.method, crate::SolveMethod::Iterative);
-            assert!(report.iterations <= 6, "{report:?}");
+            assert!(report.iterations <= 7, "{report:?}");
             assert!(report.residual.unwrap() <= TOL, "{report:?}");
             let d = e.minimize_dense().unwrap();
             assert!((&c - &d).amax() < 1e-11 * d.amax(), "{}", (&c - &d).amax());

@@ -140,13 +140,8 @@ pub fn compress_descriptors(
             });
         }
     }
-    let gram = |d: &DMatrix<f64>, m: &nalgebra::DVector<f64>| {
-        let mut w = d.clone();
-        for (i, mut row) in w.row_iter_mut().enumerate() {
-            row *= m[i];
-        }
-        d.tr_mul(&w)
-    };
+    let gram =
+        |d: &DMatrix<f64>, m: &nalgebra::DVector<f64>| fmaps_eigensolve::weighted_tr_mul(d, m, d);
     let g = gram(da, mass_a) + gram(db, mass_b);
     let eig = nalgebra::SymmetricEigen::new(g);
     let gmax = eig.eigenvalues.iter().fold(0.0f64, |a, &x| a.max(x));

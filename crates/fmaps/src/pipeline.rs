@@ -727,11 +727,7 @@ pub fn build_energy(
                 s.phi.nrows()
             )));
         }
-        let mut w = d.clone();
-        for (i, mut row) in w.row_iter_mut().enumerate() {
-            row *= s.mass[i];
-        }
-        Ok(s.phi.tr_mul(&w))
+        Ok(crate::eigensolve::weighted_tr_mul(s.phi, s.mass, d))
     };
     let mut energy = solve::FmapEnergy::new(
         project(src, d_src)?,
