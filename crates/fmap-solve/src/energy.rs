@@ -276,14 +276,7 @@ impl FmapEnergy {
             return Ok((c, SolveReport::direct(SolveMethod::Rows)));
         }
         let normal = crate::normal::Normal::new(self, ka, kb, j0);
-        let mut c = Mat::<f64>::zeros(kb, ka);
-        if let Some(c0) = &self.fixed_first_column {
-            for (i, v) in c0.iter().enumerate() {
-                c[(i, 0)] = *v;
-            }
-        }
-        let fixed = self.fixed_first_column.as_ref().map(|_| c.as_ref());
-        let b = normal.rhs(self, fixed);
+        let b = normal.rhs(self, self.fixed_first_column.as_ref().map(|c| c.as_slice()));
         if let Some((x, iterations, residual)) = normal.solve(&b) {
             let mut out = DMatrix::zeros(kb, ka);
             if let Some(c0) = &self.fixed_first_column {

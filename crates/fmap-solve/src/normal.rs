@@ -63,8 +63,6 @@ pub(crate) struct Normal {
     mask: Mat<f64>,
     /// `[√w_1 X_1 … √w_p X_p]` (k_A x k_A·p).
     xs: Mat<f64>,
-    /// `[√w_1 Y_1; …; √w_p Y_p]` (k_B·p x k_B).
-    ys: Mat<f64>,
     /// `[√w_1 Y_1; …; √w_p Y_p; √w_1 Y_1ᵀ; …; √w_p Y_pᵀ]` (2p·k_B x k_B).
     ys2: Mat<f64>,
     /// `[√w_1 X_1ᵀ; …; √w_p X_pᵀ; √w_1 X_1; …; √w_p X_p]` (2p·k_A x k_A).
@@ -84,17 +82,40 @@ impl Normal {
         let terms: Vec<_> = e.op_terms().collect();
         let p = terms.len();
         let mut xs = Mat::<f64>::zeros(ka, ka * p);
-        let mut ys = Mat::<f64>::zeros(kb * p, kb);
+        let mut ys2 = Mat::<f64>::zeros(2 * p * kb, kb);
+        let mut xs2 = Mat::<f64>::zeros(2 * p * ka, ka);
+        // Column `c` of a column-major faer matrix as a slice.
+        fn col(m: &mut Mat<f64>, c: usize) -> &mut [f64] {
+            m.col_mut(c).try_as_col_major_mut().unwrap().as_slice_mut()
+        }
         for (q, (w, (x, y))) in terms.iter().enumerate() {
             let s = w.sqrt();
+            let (x, y) = (x.as_slice(), y.as_slice());
             for l in 0..ka {
-                for j in 0..ka {
-                    xs[(j, q * ka + l)] = s * x[(j, l)];
+                let src = &x[l * ka..(l + 1) * ka];
+                for (d, v) in col(&mut xs, q * ka + l).iter_mut().zip(src) {
+                    *d = s * v;
+                }
+                // xs2 block q: (√w X_q)ᵀ; block p + q: √w X_q.
+                let dst = &mut col(&mut xs2, l)[(p + q) * ka..(p + q + 1) * ka];
+                for (d, v) in dst.iter_mut().zip(src) {
+                    *d = s * v;
+                }
+                let dst = &mut col(&mut xs2, l)[q * ka..(q + 1) * ka];
+                for (j, d) in dst.iter_mut().enumerate() {
+                    *d = s * x[l + ka * j];
                 }
             }
+            // ys2 block q: √w Y_q; block p + q: (√w Y_q)ᵀ.
             for r in 0..kb {
-                for i in 0..kb {
-                    ys[(q * kb + i, r)] = s * y[(i, r)];
+                let src = &y[r * kb..(r + 1) * kb];
+                let dst = &mut col(&mut ys2, r)[q * kb..(q + 1) * kb];
+                for (d, v) in dst.iter_mut().zip(src) {
+                    *d = s * v;
+                }
+                let dst = &mut col(&mut ys2, r)[(p + q) * kb..(p + q + 1) * kb];
+                for (i, d) in dst.iter_mut().enumerate() {
+                    *d = s * y[r + kb * i];
                 }
             }
         }
@@ -114,22 +135,6 @@ impl Normal {
         } else {
             Par::Seq
         };
-        let ys2 = Mat::from_fn(2 * p * kb, kb, |t, r| {
-            let (q, i) = (t / kb, t % kb);
-            if q < p {
-                ys[(q * kb + i, r)]
-            } else {
-                ys[((q - p) * kb + r, i)]
-            }
-        });
-        let xs2 = Mat::from_fn(2 * p * ka, ka, |t, l| {
-            let (q, j) = (t / ka, t % ka);
-            if q < p {
-                xs[(l, q * ka + j)]
-            } else {
-                xs[(j, (q - p) * ka + l)]
-            }
-        });
         let mut n = Normal {
             ka,
             kb,
@@ -138,7 +143,6 @@ impl Normal {
             aat,
             mask,
             xs,
-            ys,
             ys2,
             xs2,
             kx: Mat::zeros(0, 0),
@@ -171,8 +175,8 @@ impl Normal {
         matmul(
             kyy.as_mut(),
             Accum::Replace,
-            self.ys.transpose(),
-            self.ys.as_ref(),
+            self.ys2.as_ref().subrows(0, self.p * self.kb).transpose(),
+            self.ys2.as_ref().subrows(0, self.p * self.kb),
             1.0,
             Par::Seq,
         );
@@ -187,7 +191,7 @@ impl Normal {
         for l in self.j0..ka {
             for r in 0..kb {
                 let cross: f64 = (0..self.p)
-                    .map(|q| self.xs[(l, q * ka + l)] * self.ys[(q * kb + r, r)])
+                    .map(|q| self.xs[(l, q * ka + l)] * self.ys2[(q * kb + r, r)])
                     .sum();
                 m = m.max(kx[(l, l)] + kyy[(r, r)] + self.mask[(r, l)] - 2.0 * cross);
             }
@@ -195,29 +199,56 @@ impl Normal {
         m
     }
 
-    /// `H C` for a full k_B x k_A matrix C (the ridge included), as
+    /// Buffers for [`apply_into`](Self::apply_into), reused across the
+    /// products of one solve.
+    pub(crate) fn scratch(&self) -> Scratch {
+        let (ka, kb) = (self.ka, self.kb);
+        Scratch {
+            c: Mat::zeros(kb, ka),
+            out: Mat::zeros(kb, ka),
+            vh: Mat::zeros(kb, 2 * self.p * ka),
+        }
+    }
+
+    /// `H C` for a full k_B x k_A matrix C (the ridge included).
+    #[cfg(test)]
+    fn apply(&self, c: MatRef<'_, f64>) -> Mat<f64> {
+        let mut s = self.scratch();
+        self.apply_into(c, &mut s.out, &mut s.vh);
+        s.out
+    }
+
+    /// `out = H C` as
     /// `C K + K_Y C + (mask + ridge) ∘ C − Σ_q w_q (Y_q C X_qᵀ + Y_qᵀ C X_q)`
-    /// (K and K_Y the Kronecker factors): the cross terms are two GEMMs of
-    /// the stacked operators with one reshuffle of blocks between them.
-    pub(crate) fn apply(&self, c: MatRef<'_, f64>) -> Mat<f64> {
+    /// (K and K_Y the Kronecker factors): the blocks `Y_q C`, `Y_qᵀ C` are
+    /// written side by side into `vh` (k_B x 2p·k_A), and the cross terms
+    /// are then one GEMM of `vh` with the stacked `X_qᵀ`, `X_q`.
+    fn apply_into(&self, c: MatRef<'_, f64>, out: &mut Mat<f64>, vh: &mut Mat<f64>) {
         let (ka, kb, p) = (self.ka, self.kb, self.p);
         let par = Par::Seq;
-        let mut out =
-            Mat::<f64>::from_fn(kb, ka, |i, j| (self.mask[(i, j)] + self.ridge) * c[(i, j)]);
+        for j in 0..ka {
+            let o = out
+                .col_mut(j)
+                .try_as_col_major_mut()
+                .unwrap()
+                .as_slice_mut();
+            let m = self.mask.col(j).try_as_col_major().unwrap().as_slice();
+            for ((o, m), c) in o.iter_mut().zip(m).zip(c.col(j).iter()) {
+                *o = (m + self.ridge) * c;
+            }
+        }
         matmul(out.as_mut(), Accum::Add, c, self.kx.as_ref(), 1.0, par);
         matmul(out.as_mut(), Accum::Add, self.kyy.as_ref(), c, 1.0, par);
-        // v = [Y_1; …; Y_p; Y_1ᵀ; …; Y_pᵀ] C (2p·k_B x k_A), blocks stacked;
-        // vh = the same blocks side by side (k_B x 2p·k_A).
-        let mut v = Mat::<f64>::zeros(2 * p * kb, ka);
-        matmul(v.as_mut(), Accum::Replace, self.ys2.as_ref(), c, 1.0, par);
-        let mut vh = Mat::<f64>::zeros(kb, 2 * p * ka);
-        for j in 0..ka {
-            let src = v.col(j).try_as_col_major().unwrap().as_slice();
-            for q in 0..2 * p {
-                let dst = vh.col_mut(q * ka + j).try_as_col_major_mut().unwrap();
-                dst.as_slice_mut()
-                    .copy_from_slice(&src[q * kb..(q + 1) * kb]);
-            }
+        // vh = [Y_1 C … Y_p C, Y_1ᵀ C … Y_pᵀ C].
+        for t in 0..2 * p {
+            matmul(
+                vh.as_mut().subcols_mut(t * ka, ka),
+                Accum::Replace,
+                self.ys2.as_ref().subrows(t * kb, kb),
+                c,
+                1.0,
+                par,
+            );
         }
         // − Σ_q (Y_q C) X_qᵀ + (Y_qᵀ C) X_q.
         matmul(
@@ -228,24 +259,23 @@ impl Normal {
             -1.0,
             par,
         );
-        out
     }
 
-    /// `H_ff x` over the free unknowns (vec of the free columns of C).
-    fn apply_free(&self, x: &[f64]) -> Vec<f64> {
+    /// `H_ff x` over the free unknowns (vec of the free columns of C); the
+    /// fixed columns of `s.c` stay zero.
+    fn apply_free(&self, x: &[f64], s: &mut Scratch) -> Vec<f64> {
         let (kb, j0) = (self.kb, self.j0);
-        let mut c = Mat::<f64>::zeros(kb, self.ka);
         for (j, chunk) in x.chunks(kb).enumerate() {
-            c.col_mut(j + j0)
+            s.c.col_mut(j + j0)
                 .try_as_col_major_mut()
                 .unwrap()
                 .as_slice_mut()
                 .copy_from_slice(chunk);
         }
-        let hc = self.apply(c.as_ref());
+        self.apply_into(s.c.as_ref(), &mut s.out, &mut s.vh);
         let mut out = Vec::with_capacity(x.len());
         for j in j0..self.ka {
-            out.extend_from_slice(hc.col(j).try_as_col_major().unwrap().as_slice());
+            out.extend_from_slice(s.out.col(j).try_as_col_major().unwrap().as_slice());
         }
         out
     }
@@ -262,8 +292,8 @@ impl Normal {
         for q in 0..p {
             for r in 0..kb {
                 for i in 0..kb {
-                    yw[(i + kb * r, q)] = self.ys[(q * kb + i, r)] as f32;
-                    yw[(i + kb * r, p + q)] = self.ys[(q * kb + r, i)] as f32;
+                    yw[(i + kb * r, q)] = self.ys2[(q * kb + i, r)] as f32;
+                    yw[(i + kb * r, p + q)] = self.ys2[(q * kb + r, i)] as f32;
                 }
             }
         }
@@ -341,9 +371,13 @@ impl Normal {
     }
 
     /// The right-hand side over the free unknowns: `w_descr B Aᵀ` less the
-    /// coupling to the fixed columns `c_fixed` (k_B x k_A, zero elsewhere).
-    pub(crate) fn rhs(&self, e: &FmapEnergy, c_fixed: Option<MatRef<'_, f64>>) -> Vec<f64> {
-        let (ka, kb) = (self.ka, self.kb);
+    /// coupling `H (c0 e_0ᵀ)` to the fixed first column `c0` (when
+    /// `j0 = 1`). With one nonzero column the product is rank one per
+    /// term, `c0 K[0, :] − Σ_q w_q ((Y_q c0) X_q[:, 0]ᵀ + (Y_qᵀ c0) X_q[0, :])`
+    /// (columns j ≥ 1; the other terms act on column 0 only): O(p k²), not
+    /// a full product with H.
+    pub(crate) fn rhs(&self, e: &FmapEnergy, c0: Option<&[f64]>) -> Vec<f64> {
+        let (ka, kb, p) = (self.ka, self.kb, self.p);
         let a = MatRef::from_column_major_slice(e.descr_a.as_slice(), ka, e.descr_a.ncols());
         let b = MatRef::from_column_major_slice(e.descr_b.as_slice(), kb, e.descr_b.ncols());
         let mut bat = Mat::<f64>::zeros(kb, ka);
@@ -355,9 +389,40 @@ impl Normal {
             e.w_descr,
             Par::Seq,
         );
-        if let Some(c) = c_fixed {
-            let hc = self.apply(c);
-            bat -= hc;
+        if let (Some(c0), 1) = (c0, self.j0) {
+            let c0 = MatRef::from_column_major_slice(c0, kb, 1);
+            // u = [Y_1 c0 … Y_p c0, Y_1ᵀ c0 … Y_pᵀ c0] (k_B x 2p).
+            let mut u = Mat::<f64>::zeros(2 * p * kb, 1);
+            matmul(
+                u.as_mut(),
+                Accum::Replace,
+                self.ys2.as_ref(),
+                c0,
+                1.0,
+                Par::Seq,
+            );
+            let u = MatRef::from_column_major_slice(
+                u.col(0).try_as_col_major().unwrap().as_slice(),
+                kb,
+                2 * p,
+            );
+            // z[q, j] = √w X_q[j, 0], z[p + q, j] = √w X_q[0, j].
+            let z = Mat::<f64>::from_fn(2 * p, ka, |t, j| {
+                if t < p {
+                    self.xs[(j, t * ka)]
+                } else {
+                    self.xs[(0, (t - p) * ka + j)]
+                }
+            });
+            matmul(bat.as_mut(), Accum::Add, u, z.as_ref(), 1.0, Par::Seq);
+            matmul(
+                bat.as_mut(),
+                Accum::Add,
+                c0,
+                self.kx.as_ref().subrows(0, 1),
+                -1.0,
+                Par::Seq,
+            );
         }
         let mut out = Vec::with_capacity(self.n());
         for j in self.j0..ka {
@@ -412,8 +477,17 @@ impl Normal {
         .ok()?;
         let l = l.as_ref();
         let precond = |r: &[f64]| -> Vec<f64> { precondition(l, r) };
-        pcg(|x| self.apply_free(x), precond, b, bn)
+        let mut scratch = self.scratch();
+        pcg(|x| self.apply_free(x, &mut scratch), precond, b, bn)
     }
+}
+
+/// Buffers reused by the products with H of one solve.
+pub(crate) struct Scratch {
+    /// C with the free columns of the current vector, zero elsewhere.
+    c: Mat<f64>,
+    out: Mat<f64>,
+    vh: Mat<f64>,
 }
 
 /// `L⁻ᵀ L⁻¹ r` in f32 (r scaled to unit max norm first, so that no value
@@ -437,7 +511,7 @@ fn precondition(l: MatRef<'_, f32>, r: &[f64]) -> Vec<f64> {
 /// four iterations, accepting it then if below [`ACCEPT`]. The residual is
 /// recomputed from x before returning: (x, iterations, ‖b − A x‖ / ‖b‖).
 fn pcg(
-    apply: impl Fn(&[f64]) -> Vec<f64>,
+    mut apply: impl FnMut(&[f64]) -> Vec<f64>,
     precond: impl Fn(&[f64]) -> Vec<f64>,
     b: &[f64],
     bn: f64,
@@ -568,10 +642,11 @@ mod tests {
             let h32 = MatRef::from_column_major_slice(&buf[off..off + n * n], n, n);
             let hmax = (0..m).fold(0.0f64, |a, i| a.max(h[(i, i)]));
             let mut worst = (0.0f64, 0.0f64);
+            let mut scratch = nrm.scratch();
             for c in 0..n {
                 let mut x = vec![0.0; n];
                 x[c] = 1.0;
-                let hx = nrm.apply_free(&x);
+                let hx = nrm.apply_free(&x, &mut scratch);
                 for r in 0..n {
                     // Free index t ↔ full index t + kb j0.
                     let (fr, fc) = (r + kb * j0, c + kb * j0);
@@ -588,6 +663,32 @@ mod tests {
             assert!(worst.0 < 1e-13 * hmax, "{ka}x{kb}: f64 {}", worst.0);
             assert!(worst.1 < 1e-6 * hmax, "{ka}x{kb}: f32 {}", worst.1);
             assert!(worst.1 > 0.0, "the f32 matrix is not exact");
+        }
+    }
+
+    /// The rank-one right-hand side equals `w B Aᵀ − H (c0 e_0ᵀ)` by the
+    /// full structured product.
+    #[test]
+    fn right_hand_side_matches_the_full_product() {
+        for (ka, kb) in [(21, 23), (7, 9)] {
+            let e = energy(ka, kb, true);
+            let nrm = Normal::new(&e, ka, kb, 1);
+            let c0 = e.fixed_first_column.as_ref().unwrap();
+            let rhs = nrm.rhs(&e, Some(c0.as_slice()));
+            let mut c = Mat::<f64>::zeros(kb, ka);
+            for i in 0..kb {
+                c[(i, 0)] = c0[i];
+            }
+            let hc = nrm.apply(c.as_ref());
+            let bat = &e.descr_b * e.descr_a.transpose() * e.w_descr;
+            let mut worst = 0.0f64;
+            for j in 1..ka {
+                for i in 0..kb {
+                    let full = bat[(i, j)] - hc[(i, j)];
+                    worst = worst.max((rhs[i + kb * (j - 1)] - full).abs() / full.abs().max(1.0));
+                }
+            }
+            assert!(worst < 1e-12, "{ka}x{kb}: {worst}");
         }
     }
 
