@@ -30,6 +30,7 @@
 //! ```
 #![deny(missing_docs)]
 
+mod chol;
 mod energy;
 mod nn;
 mod normal;
