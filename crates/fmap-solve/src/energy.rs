@@ -218,21 +218,41 @@ impl FmapEnergy {
 
     /// The energy of `c` (k_B x k_A).
     pub fn value(&self, c: &DMatrix<f64>) -> f64 {
-        let mut e = self.w_descr * (c * &self.descr_a - &self.descr_b).norm_squared();
-        e += self.w_lap * self.lap_mask.component_mul(&c.component_mul(c)).sum();
-        for (w, (x, y)) in self.op_terms() {
-            e += w * (c * x - y * c).norm_squared();
-        }
-        e
+        self.weighted_sum(&self.terms(c))
+    }
+
+    /// `Σ w_t terms[t]` over the terms with nonzero weight: the energy,
+    /// given the unweighted [`terms`](Self::terms) of a map.
+    pub fn weighted_sum(&self, terms: &[f64; 4]) -> f64 {
+        [self.w_descr, self.w_lap, self.w_dcomm, self.w_orient]
+            .iter()
+            .zip(terms)
+            .filter(|(w, _)| **w != 0.0)
+            .map(|(w, t)| w * t)
+            .sum()
     }
 
     /// The values of the four terms at `c`, unweighted:
-    /// `[descr, lap, dcomm, orient]`.
+    /// `[descr, lap, dcomm, orient]`. The operator terms are two small
+    /// GEMMs per pair, pairs in parallel, summed in a fixed order.
     pub fn terms(&self, c: &DMatrix<f64>) -> [f64; 4] {
+        let (kb, ka) = c.shape();
+        let cf = MatRef::from_column_major_slice(c.as_slice(), kb, ka);
         let op_sum = |ops: &OperatorPairs| -> f64 {
-            ops.iter()
-                .map(|(x, y)| (c * x - y * c).norm_squared())
-                .sum()
+            let norms: Vec<f64> = ops
+                .par_iter()
+                .map_init(
+                    || Mat::<f64>::zeros(kb, ka),
+                    |r, (x, y)| {
+                        let x = MatRef::from_column_major_slice(x.as_slice(), x.nrows(), x.ncols());
+                        let y = MatRef::from_column_major_slice(y.as_slice(), y.nrows(), y.ncols());
+                        matmul(r.as_mut(), Accum::Replace, cf, x, 1.0, Par::Seq);
+                        matmul(r.as_mut(), Accum::Add, y, cf, -1.0, Par::Seq);
+                        r.squared_norm_l2()
+                    },
+                )
+                .collect();
+            norms.iter().sum()
         };
         [
             (c * &self.descr_a - &self.descr_b).norm_squared(),

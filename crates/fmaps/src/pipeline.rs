@@ -524,8 +524,8 @@ pub fn match_prepared(
         ],
     );
     let c_ba = energy.minimize()?;
-    let energy_value = energy.value(&c_ba);
     let energy_terms = energy.terms(&c_ba);
+    let energy_value = energy.weighted_sum(&energy_terms);
     times.solve = t.elapsed().as_secs_f64();
 
     let t = Instant::now();
