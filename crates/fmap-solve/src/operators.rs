@@ -174,27 +174,26 @@ pub fn orientation_operators(
     };
     let row = |v: usize| &phi_rows[v * k..(v + 1) * k];
     let pairs = k * k.saturating_sub(1) / 2;
-    let kp = k.div_ceil(32) * 32;
+    // φ row-major with rows padded to a multiple of 8 (whole vectors for
+    // the wedge kernel; the padding is zero and never reaches the output).
+    let kp = k.div_ceil(8) * 8;
+    let mut padded = vec![0.0; n * kp];
+    for (dst, src) in padded.chunks_mut(kp.max(1)).zip(phi_rows.chunks(k.max(1))) {
+        dst[..k].copy_from_slice(src);
+    }
     let anti = sum_over_blocks(inner.len(), pairs, p, |i0, i1, acc, wt| {
         let list = &inner[i0..i1];
-        // Every entry is written below: no zeroing. 32 values of padding
-        // (see wedge_sums).
-        wt.resize(pairs * list.len() + 32, 0.0);
-        let (mut pr, mut nr) = (Vec::new(), Vec::new());
+        // Every entry is written below: no zeroing.
+        wt.resize(pairs * list.len(), 0.0);
+        let (mut prev, mut next) = (Vec::new(), Vec::new());
         for (idx, &u) in list.iter().enumerate() {
-            let col = &mut wt[idx * pairs..(idx + 1) * pairs + 32];
-            // Rows of φ at the prev and next vertices of u's faces,
-            // zero-padded to kp.
             let fan = &around[start[u]..start[u + 1]];
-            pr.clear();
-            nr.clear();
-            pr.resize(fan.len() * kp, 0.0);
-            nr.resize(fan.len() * kp, 0.0);
-            for (f, &(next, prev)) in fan.iter().enumerate() {
-                pr[f * kp..f * kp + k].copy_from_slice(row(prev));
-                nr[f * kp..f * kp + k].copy_from_slice(row(next));
-            }
-            crate::simd::wedge_sums(&pr, &nr, fan.len(), kp, k, col);
+            next.clear();
+            prev.clear();
+            next.extend(fan.iter().map(|f| f.0));
+            prev.extend(fan.iter().map(|f| f.1));
+            let col = &mut wt[idx * pairs..(idx + 1) * pairs];
+            crate::simd::wedge_sums(&padded, kp, k, &prev, &next, col);
         }
         let d = gather_d(list);
         matmul(
