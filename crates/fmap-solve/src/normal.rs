@@ -33,7 +33,7 @@
 //! written once.
 
 use faer::linalg::matmul::matmul;
-use faer::reborrow::ReborrowMut;
+use faer::reborrow::{Reborrow, ReborrowMut};
 use faer::{Accum, Mat, MatMut, MatRef, Par};
 use std::mem::MaybeUninit;
 
@@ -207,6 +207,7 @@ impl Normal {
         Scratch {
             c: Mat::zeros(kb, ka),
             out: Mat::zeros(kb, ka),
+            out2: Mat::zeros(kb, ka),
             vh: Mat::zeros(kb, 2 * self.p * ka),
         }
     }
@@ -215,7 +216,7 @@ impl Normal {
     #[cfg(test)]
     fn apply(&self, c: MatRef<'_, f64>) -> Mat<f64> {
         let mut s = self.scratch();
-        self.apply_into(c, &mut s.out, &mut s.vh);
+        self.apply_into(c, &mut s.out, &mut s.out2, &mut s.vh);
         s.out
     }
 
@@ -223,42 +224,84 @@ impl Normal {
     /// `C K + K_Y C + (mask + ridge) ∘ C − Σ_q w_q (Y_q C X_qᵀ + Y_qᵀ C X_q)`
     /// (K and K_Y the Kronecker factors): the blocks `Y_q C`, `Y_qᵀ C` are
     /// written side by side into `vh` (k_B x 2p·k_A), and the cross terms
-    /// are then one GEMM of `vh` with the stacked `X_qᵀ`, `X_q`.
-    fn apply_into(&self, c: MatRef<'_, f64>, out: &mut Mat<f64>, vh: &mut Mat<f64>) {
-        let (ka, kb, p) = (self.ka, self.kb, self.p);
-        let par = Par::Seq;
-        for j in 0..ka {
-            let o = out
-                .col_mut(j)
-                .try_as_col_major_mut()
-                .unwrap()
-                .as_slice_mut();
-            let m = self.mask.col(j).try_as_col_major().unwrap().as_slice();
-            for ((o, m), c) in o.iter_mut().zip(m).zip(c.col(j).iter()) {
-                *o = (m + self.ridge) * c;
+    /// are then one GEMM of `vh` with the stacked `X_qᵀ`, `X_q`. With more
+    /// than one thread the 2p blocks are split in two halves, the second
+    /// summed into `out2` on another thread and added at the end.
+    fn apply_into(
+        &self,
+        c: MatRef<'_, f64>,
+        out: &mut Mat<f64>,
+        out2: &mut Mat<f64>,
+        vh: &mut Mat<f64>,
+    ) {
+        let (ka, p) = (self.ka, self.p);
+        let parallel = !matches!(self.par, Par::Seq) && p > 0;
+        let half = if parallel { p } else { 2 * p };
+        let (vh1, vh2) = vh.as_mut().split_at_col_mut(half * ka);
+        let first = |out: &mut Mat<f64>| {
+            for j in 0..ka {
+                let o = out
+                    .col_mut(j)
+                    .try_as_col_major_mut()
+                    .unwrap()
+                    .as_slice_mut();
+                let m = self.mask.col(j).try_as_col_major().unwrap().as_slice();
+                for ((o, m), c) in o.iter_mut().zip(m).zip(c.col(j).iter()) {
+                    *o = (m + self.ridge) * c;
+                }
             }
-        }
-        matmul(out.as_mut(), Accum::Add, c, self.kx.as_ref(), 1.0, par);
-        matmul(out.as_mut(), Accum::Add, self.kyy.as_ref(), c, 1.0, par);
-        // vh = [Y_1 C … Y_p C, Y_1ᵀ C … Y_pᵀ C].
-        for t in 0..2 * p {
+            matmul(out.as_mut(), Accum::Add, c, self.kx.as_ref(), 1.0, Par::Seq);
             matmul(
-                vh.as_mut().subcols_mut(t * ka, ka),
-                Accum::Replace,
-                self.ys2.as_ref().subrows(t * kb, kb),
+                out.as_mut(),
+                Accum::Add,
+                self.kyy.as_ref(),
                 c,
                 1.0,
-                par,
+                Par::Seq,
+            );
+            self.cross_terms(c, 0, vh1, out.as_mut(), Accum::Add);
+        };
+        if parallel {
+            rayon::join(
+                || first(out),
+                || self.cross_terms(c, half, vh2, out2.as_mut(), Accum::Replace),
+            );
+            faer::zip!(out.as_mut(), out2.as_ref()).for_each(|faer::unzip!(o, t)| *o += *t);
+        } else {
+            first(out);
+        }
+    }
+
+    /// `out (+)= − Σ_t V_t Z_t` over the blocks t = t0 .. t0 + (columns of
+    /// `vh`) / k_A of `[Y_1; …; Y_p; Y_1ᵀ; …; Y_pᵀ]` (V_t = block t times C,
+    /// written into `vh`) and of the stacked `[X_1ᵀ; …; X_pᵀ; X_1; …; X_p]`.
+    fn cross_terms(
+        &self,
+        c: MatRef<'_, f64>,
+        t0: usize,
+        mut vh: MatMut<'_, f64>,
+        out: MatMut<'_, f64>,
+        accum: Accum,
+    ) {
+        let (ka, kb) = (self.ka, self.kb);
+        let nt = vh.ncols() / ka;
+        for t in 0..nt {
+            matmul(
+                vh.rb_mut().subcols_mut(t * ka, ka),
+                Accum::Replace,
+                self.ys2.as_ref().subrows((t0 + t) * kb, kb),
+                c,
+                1.0,
+                Par::Seq,
             );
         }
-        // − Σ_q (Y_q C) X_qᵀ + (Y_qᵀ C) X_q.
         matmul(
-            out.as_mut(),
-            Accum::Add,
-            vh.as_ref(),
-            self.xs2.as_ref(),
+            out,
+            accum,
+            vh.rb(),
+            self.xs2.as_ref().subrows(t0 * ka, nt * ka),
             -1.0,
-            par,
+            Par::Seq,
         );
     }
 
@@ -273,7 +316,7 @@ impl Normal {
                 .as_slice_mut()
                 .copy_from_slice(chunk);
         }
-        self.apply_into(s.c.as_ref(), &mut s.out, &mut s.vh);
+        self.apply_into(s.c.as_ref(), &mut s.out, &mut s.out2, &mut s.vh);
         let mut out = Vec::with_capacity(x.len());
         for j in j0..self.ka {
             out.extend_from_slice(s.out.col(j).try_as_col_major().unwrap().as_slice());
@@ -489,6 +532,8 @@ pub(crate) struct Scratch {
     /// C with the free columns of the current vector, zero elsewhere.
     c: Mat<f64>,
     out: Mat<f64>,
+    /// The second half of the cross terms (parallel products).
+    out2: Mat<f64>,
     vh: Mat<f64>,
 }
 
