@@ -341,20 +341,44 @@ impl Normal {
                 }
             }
         }
-        h.par_chunks_mut(n * kb).enumerate().for_each(|(lf, slab)| {
-            let l = lf + j0;
-            let nj = ka - l;
-            // z[q, j − l] = √w X_q[j, l], z[p + q, j − l] = √w X_q[l, j].
-            let z = Mat::<f32>::from_fn(2 * p, nj, |t, jj| {
-                let j = jj + l;
-                if t < p {
-                    self.xs[(j, t * ka + l)] as f32
-                } else {
-                    self.xs[(l, (t - p) * ka + j)] as f32
+        // Column blocks l in groups of about COLS columns of G (one GEMM
+        // per group: faer packs yw once per group, not once per l).
+        const COLS: usize = 48;
+        let nl = ka - j0;
+        let mut groups = Vec::new();
+        let (mut start, mut cols) = (0, 0);
+        for lf in 0..nl {
+            cols += nl - lf;
+            if cols >= COLS || lf + 1 == nl {
+                groups.push((start, lf + 1));
+                (start, cols) = (lf + 1, 0);
+            }
+        }
+        let mut parts = Vec::with_capacity(groups.len());
+        let mut rest = h;
+        for &(a, b) in &groups {
+            let (head, tail) = rest.split_at_mut((b - a) * n * kb);
+            parts.push((a, b, head));
+            rest = tail;
+        }
+        parts.into_par_iter().for_each(|(a, b, slabs)| {
+            let total: usize = (a..b).map(|lf| nl - lf).sum();
+            // z[q, c] = √w X_q[j, l], z[p + q, c] = √w X_q[l, j] for the
+            // column c of (l, j ≥ l) in the group.
+            let mut z = Mat::<f32>::zeros(2 * p, total);
+            let mut c = 0;
+            for lf in a..b {
+                let l = lf + j0;
+                for j in l..ka {
+                    for q in 0..p {
+                        z[(q, c)] = self.xs[(j, q * ka + l)] as f32;
+                        z[(p + q, c)] = self.xs[(l, q * ka + j)] as f32;
+                    }
+                    c += 1;
                 }
-            });
-            // g[(i + kb r), j − l] = Σ_q w_q (Y_q[i,r] X_q[j,l] + Y_q[r,i] X_q[l,j]).
-            let mut g = Mat::<f32>::zeros(kb * kb, nj);
+            }
+            // g[(i + kb r), c] = Σ_q w_q (Y_q[i,r] X_q[j,l] + Y_q[r,i] X_q[l,j]).
+            let mut g = Mat::<f32>::zeros(kb * kb, total);
             matmul(
                 g.as_mut(),
                 Accum::Replace,
@@ -364,31 +388,36 @@ impl Normal {
                 Par::Seq,
             );
             let mut seg = vec![0.0f32; kb];
-            for r in 0..kb {
-                let col = &mut slab[r * n..(r + 1) * n];
-                let top = kb * lf;
-                for v in &mut col[..top] {
-                    v.write(0.0);
-                }
-                for jj in 0..nj {
-                    let j = jj + l;
-                    let gc =
-                        &g.col(jj).try_as_col_major().unwrap().as_slice()[kb * r..kb * (r + 1)];
-                    for (s, g) in seg.iter_mut().zip(gc) {
-                        *s = -g;
+            let mut c0 = 0;
+            for (lf, slab) in (a..b).zip(slabs.chunks_mut(n * kb)) {
+                let l = lf + j0;
+                let nj = ka - l;
+                for r in 0..kb {
+                    let col = &mut slab[r * n..(r + 1) * n];
+                    for v in &mut col[..kb * lf] {
+                        v.write(0.0);
                     }
-                    seg[r] += kx[(j, l)] as f32;
-                    if jj == 0 {
-                        for (i, s) in seg.iter_mut().enumerate() {
-                            *s = if i < r { 0.0 } else { *s + kyy[(i, r)] as f32 };
+                    for jj in 0..nj {
+                        let j = jj + l;
+                        let gc = &g.col(c0 + jj).try_as_col_major().unwrap().as_slice()
+                            [kb * r..kb * (r + 1)];
+                        for (s, g) in seg.iter_mut().zip(gc) {
+                            *s = -g;
                         }
-                        seg[r] += (self.mask[(r, l)] + self.ridge) as f32;
-                    }
-                    let row0 = kb * (j - j0);
-                    for (d, s) in col[row0..row0 + kb].iter_mut().zip(&seg) {
-                        d.write(*s);
+                        seg[r] += kx[(j, l)] as f32;
+                        if jj == 0 {
+                            for (i, s) in seg.iter_mut().enumerate() {
+                                *s = if i < r { 0.0 } else { *s + kyy[(i, r)] as f32 };
+                            }
+                            seg[r] += (self.mask[(r, l)] + self.ridge) as f32;
+                        }
+                        let row0 = kb * (j - j0);
+                        for (d, s) in col[row0..row0 + kb].iter_mut().zip(&seg) {
+                            d.write(*s);
+                        }
                     }
                 }
+                c0 += nj;
             }
         });
     }
