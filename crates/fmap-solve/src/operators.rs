@@ -106,7 +106,15 @@ pub fn orientation_operators(
     }
     let k = phi.ncols();
     let p = descriptors.ncols();
-    let phi_rows = row_major(phi);
+    // φ row-major with rows padded to a multiple of 8 (whole vectors for
+    // the wedge kernel; the padding is zero and never reaches the output).
+    let kp = k.div_ceil(8) * 8;
+    let mut padded = vec![0.0; n * kp];
+    for (j, col) in phi.column_iter().enumerate() {
+        for (v, &x) in col.iter().enumerate() {
+            padded[v * kp + j] = x;
+        }
+    }
     let sign = if reversing { -1.0 } else { 1.0 } / 6.0;
     // Descriptor values row-major (the p values of a vertex contiguous),
     // less the midpoint of each descriptor's range: Σ_u W_u = 0 below (the
@@ -158,11 +166,24 @@ pub fn orientation_operators(
     // (boundary, inconsistent orientation) get the full k x k form.
     let closed_fan = |u: usize| {
         let fan = &around[start[u]..start[u + 1]];
-        let mut nexts: Vec<usize> = fan.iter().map(|f| f.0).collect();
-        let mut prevs: Vec<usize> = fan.iter().map(|f| f.1).collect();
-        nexts.sort_unstable();
-        prevs.sort_unstable();
-        nexts == prevs
+        // Small fans (all of them on meshes of sane valence) on the stack.
+        const SMALL: usize = 24;
+        if fan.len() <= SMALL {
+            let (mut nexts, mut prevs) = ([0usize; SMALL], [0usize; SMALL]);
+            for (i, f) in fan.iter().enumerate() {
+                (nexts[i], prevs[i]) = (f.0, f.1);
+            }
+            let (nexts, prevs) = (&mut nexts[..fan.len()], &mut prevs[..fan.len()]);
+            nexts.sort_unstable();
+            prevs.sort_unstable();
+            nexts == prevs
+        } else {
+            let mut nexts: Vec<usize> = fan.iter().map(|f| f.0).collect();
+            let mut prevs: Vec<usize> = fan.iter().map(|f| f.1).collect();
+            nexts.sort_unstable();
+            prevs.sort_unstable();
+            nexts == prevs
+        }
     };
     let (inner, open): (Vec<usize>, Vec<usize>) = (0..n).partition(|&u| closed_fan(u));
     let gather_d = |list: &[usize]| -> Vec<f64> {
@@ -172,15 +193,8 @@ pub fn orientation_operators(
         }
         out
     };
-    let row = |v: usize| &phi_rows[v * k..(v + 1) * k];
+    let row = |v: usize| &padded[v * kp..v * kp + k];
     let pairs = k * k.saturating_sub(1) / 2;
-    // φ row-major with rows padded to a multiple of 8 (whole vectors for
-    // the wedge kernel; the padding is zero and never reaches the output).
-    let kp = k.div_ceil(8) * 8;
-    let mut padded = vec![0.0; n * kp];
-    for (dst, src) in padded.chunks_mut(kp.max(1)).zip(phi_rows.chunks(k.max(1))) {
-        dst[..k].copy_from_slice(src);
-    }
     let anti = sum_over_blocks(inner.len(), pairs, p, |i0, i1, acc, wt| {
         let list = &inner[i0..i1];
         // Every entry is written below: no zeroing.
