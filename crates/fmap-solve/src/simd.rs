@@ -12,21 +12,27 @@ fn fma<const FUSED: bool>(a: f64, b: f64, c: f64) -> f64 {
     if FUSED { a.mul_add(b, c) } else { a * b + c }
 }
 
+/// The faces around one vertex for [`wedge_sums`]: rows `prev[f]` and
+/// `next[f]` of `rows` (row-major, `kp` values per row, the first `k` used)
+/// are the basis values at the previous and next corners of face f.
+#[derive(Clone, Copy)]
+pub(crate) struct Fan<'a> {
+    pub rows: &'a [f64],
+    pub kp: usize,
+    pub k: usize,
+    pub prev: &'a [usize],
+    pub next: &'a [usize],
+}
+
 /// For j in 1..k, writes `out[j(j−1)/2 + i] = Σ_f P[f,i] N[f,j] − N[f,i] P[f,j]`
 /// for i < j: the entries above the diagonal of `Pᵀ N − Nᵀ P`, column by
 /// column, where row f of P is row `prev[f]` of `rows` and row f of N is
 /// row `next[f]` (`rows` row-major with `kp` values per row, kp ≥ k).
 #[inline(always)]
-fn wedge_sums_body<const FUSED: bool>(
-    rows: &[f64],
-    kp: usize,
-    k: usize,
-    prev: &[usize],
-    next: &[usize],
-    out: &mut [f64],
-) {
+fn wedge_sums_body<const FUSED: bool>(fan: &Fan<'_>, out: &mut [f64]) {
+    let (rows, kp, prev, next) = (fan.rows, fan.kp, fan.prev, fan.next);
     let mut base = 0;
-    for j in 1..k {
+    for j in 1..fan.k {
         let o = &mut out[base..base + j];
         o.fill(0.0);
         for (&pf, &nf) in prev.iter().zip(next) {
@@ -46,35 +52,31 @@ fn wedge_sums_body<const FUSED: bool>(
 /// See [`wedge_sums_body`]. `rows` must hold `kp` values per row with
 /// `kp` a multiple of 8 (the AVX-512 kernel reads whole vectors of 8; the
 /// values past k in each row are read but never affect the output).
-pub(crate) fn wedge_sums(
-    rows: &[f64],
-    kp: usize,
-    k: usize,
-    prev: &[usize],
-    next: &[usize],
-    out: &mut [f64],
-) {
-    assert!(kp.is_multiple_of(8) && kp >= k && prev.len() == next.len());
-    assert!(prev.iter().chain(next).all(|&v| (v + 1) * kp <= rows.len()));
+pub(crate) fn wedge_sums(fan: &Fan<'_>, out: &mut [f64]) {
+    let (kp, k) = (fan.kp, fan.k);
+    assert!(kp.is_multiple_of(8) && kp >= k && fan.prev.len() == fan.next.len());
+    let whole_row = |&v: &usize| (v + 1) * kp <= fan.rows.len();
+    assert!(fan.prev.iter().chain(fan.next).all(whole_row));
     assert!(out.len() >= k * k.saturating_sub(1) / 2);
     #[cfg(target_arch = "x86_64")]
     {
         if std::arch::is_x86_feature_detected!("avx512f") {
             // SAFETY: the CPU supports AVX-512F (checked just above); the
             // bounds the kernel relies on are asserted above.
-            return unsafe { x86::wedge_sums_avx512(rows, kp, k, prev, next, out) };
+            return unsafe { x86::wedge_sums_avx512(fan, out) };
         }
         if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma")
         {
             // SAFETY: the CPU supports AVX2 and FMA (checked just above).
-            return unsafe { x86::wedge_sums_avx2(rows, kp, k, prev, next, out) };
+            return unsafe { x86::wedge_sums_avx2(fan, out) };
         }
     }
-    wedge_sums_body::<false>(rows, kp, k, prev, next, out)
+    wedge_sums_body::<false>(fan, out)
 }
 
 #[cfg(target_arch = "x86_64")]
 mod x86 {
+    use super::Fan;
     use std::arch::x86_64::*;
 
     /// [`wedge_sums_body`](super::wedge_sums_body) with register tiles of
@@ -89,14 +91,8 @@ mod x86 {
     /// address a whole row of `kp` values of `rows`, kp a multiple of 8 and
     /// ≥ k (checked by the caller).
     #[target_feature(enable = "avx512f")]
-    pub(super) unsafe fn wedge_sums_avx512(
-        rows: &[f64],
-        kp: usize,
-        k: usize,
-        prev: &[usize],
-        next: &[usize],
-        out: &mut [f64],
-    ) {
+    pub(super) unsafe fn wedge_sums_avx512(fan: &Fan<'_>, out: &mut [f64]) {
+        let k = fan.k;
         let mut j = 1;
         while j < k {
             let cols = (k - j).min(W);
@@ -109,10 +105,10 @@ mod x86 {
                 // within kp (i0 + 8 nv ≤ round_up(need, 8) ≤ kp).
                 unsafe {
                     match nv {
-                        1 => tile::<1>(rows, kp, k, prev, next, out, j, cols, i0),
-                        2 => tile::<2>(rows, kp, k, prev, next, out, j, cols, i0),
-                        3 => tile::<3>(rows, kp, k, prev, next, out, j, cols, i0),
-                        _ => tile::<4>(rows, kp, k, prev, next, out, j, cols, i0),
+                        1 => tile::<1>(fan, out, j, cols, i0),
+                        2 => tile::<2>(fan, out, j, cols, i0),
+                        3 => tile::<3>(fan, out, j, cols, i0),
+                        _ => tile::<4>(fan, out, j, cols, i0),
                     }
                 }
                 i0 += 32;
@@ -129,18 +125,20 @@ mod x86 {
     /// # Safety
     /// As [`wedge_sums_avx512`], and i0 + 8 NV ≤ kp.
     #[target_feature(enable = "avx512f")]
-    #[allow(clippy::too_many_arguments)]
     unsafe fn tile<const NV: usize>(
-        rows: &[f64],
-        kp: usize,
-        k: usize,
-        prev: &[usize],
-        next: &[usize],
+        fan: &Fan<'_>,
         out: &mut [f64],
         j: usize,
         cols: usize,
         i0: usize,
     ) {
+        let Fan {
+            rows,
+            kp,
+            k,
+            prev,
+            next,
+        } = *fan;
         // Columns past the tile repeat its last one (never stored).
         let jc: [usize; W] = std::array::from_fn(|c| (j + c).min(k - 1));
         let mut acc = [[_mm512_setzero_pd(); NV]; W];
@@ -182,15 +180,8 @@ mod x86 {
     }
 
     #[target_feature(enable = "avx2,fma")]
-    pub(super) fn wedge_sums_avx2(
-        rows: &[f64],
-        kp: usize,
-        k: usize,
-        prev: &[usize],
-        next: &[usize],
-        out: &mut [f64],
-    ) {
-        super::wedge_sums_body::<true>(rows, kp, k, prev, next, out)
+    pub(super) fn wedge_sums_avx2(fan: &Fan<'_>, out: &mut [f64]) {
+        super::wedge_sums_body::<true>(fan, out)
     }
 }
 
@@ -233,9 +224,16 @@ mod tests {
                     }
                 }
                 let mut fast = vec![f64::NAN; m];
-                wedge_sums(&rows, kp, k, &prev, &next, &mut fast);
+                let fan = Fan {
+                    rows: &rows,
+                    kp,
+                    k,
+                    prev: &prev,
+                    next: &next,
+                };
+                wedge_sums(&fan, &mut fast);
                 let mut plain = vec![f64::NAN; m];
-                wedge_sums_body::<false>(&rows, kp, k, &prev, &next, &mut plain);
+                wedge_sums_body::<false>(&fan, &mut plain);
                 for t in 0..m {
                     assert!((fast[t] - want[t]).abs() < 1e-13, "k {k} deg {deg} at {t}");
                     assert!((plain[t] - want[t]).abs() < 1e-13, "k {k} deg {deg} at {t}");
