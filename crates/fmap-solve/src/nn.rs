@@ -331,16 +331,34 @@ fn search(
         }
         s => s,
     };
+    if strategy == NnStrategy::Tiles
+        && let Some(found) = crate::tiles::search(data, queries, hint)
+    {
+        return found;
+    }
+    // The f32 strategies need coordinates well inside f32's range: far
+    // below it the cross terms underflow (the band then covers every row),
+    // far above it they overflow. Nearest rows do not change when both
+    // sets are scaled by one power of two, which is exact in f64.
+    let scaled = power_of_two_scale(data, queries).map(|s| (data * s, queries * s));
+    let (data, queries) = match &scaled {
+        Some((x, q)) => (x, q),
+        None => (data, queries),
+    };
     match strategy {
         NnStrategy::Tree if d > 0 => return tree_search(data, queries),
         NnStrategy::Prefix if d >= 2 * PREFIX_MIN => return prefix_search(data, queries, hint),
-        NnStrategy::Tiles => {
-            if let Some(found) = crate::tiles::search(data, queries, hint) {
-                return found;
-            }
-        }
         _ => {}
     }
+    brute_search(data, queries)
+}
+
+/// Every query against every data row: blocked f32 GEMMs select the rows
+/// within [`score_err`]'s band of the best score, re-checked in f64.
+/// Exact at any scale (the band covers underflow); fast where the
+/// coordinates are well inside f32's range.
+fn brute_search(data: &DMatrix<f64>, queries: &DMatrix<f64>) -> Vec<usize> {
+    let (nx, d) = (data.nrows(), data.ncols());
     // Row-major copies: each row contiguous, for the direct re-checks.
     let x_rows = row_major(data, None);
     let x_norm: Vec<f64> = x_rows
@@ -352,7 +370,6 @@ fn search(
     let x_mat = MatRef::from_column_major_slice(&x32, nx, d);
     let q_rows = row_major(queries, None);
     let nq = queries.nrows();
-    let u = f64::from(f32::EPSILON) / 2.0;
     let starts: Vec<usize> = (0..nq).step_by(BLOCK).collect();
     let blocks: Vec<Vec<usize>> = starts
         .par_iter()
@@ -375,7 +392,7 @@ fn search(
                 for i in 0..rows {
                     let qi = &q_rows[(q0 + i) * d..(q0 + i + 1) * d];
                     let q_norm: f64 = qi.iter().map(|v| v * v).sum();
-                    let band = 4.0 * (d as f64 + 2.0) * u * (q_norm + x_norm_max) + 1e-300;
+                    let band = 4.0 * score_err(d, q_norm, x_norm_max);
                     let col = &buf.col_as_slice(i)[..nx];
                     out.push(brute_query(&x_rows, &x_norm, col, qi, band));
                 }
@@ -384,6 +401,49 @@ fn search(
         )
         .collect();
     blocks.into_iter().flatten().collect()
+}
+
+/// A bound on the error of a score `|x|² − 2 q·x` whose cross term is
+/// computed from f32 copies of `q` and `x` by a length-`d` f32 dot product
+/// (`q_norm` = |q|², `x_norm_max` ≥ |x|²), with the norms exact:
+/// relative rounding, `(d + 2) u |q||x|` for the dot product (u = 2⁻²⁴),
+/// twice, folded with `2|q||x| ≤ |q|² + |x|²`; and the absolute errors that
+/// relative rounding does not cover, each at most f32's smallest normal λ
+/// (flushed to zero or gradually underflowed): coordinates converted below
+/// the normal range (`√d λ (|q| + |x|)`), products and partial sums (`2 d
+/// λ`), twice, plus a margin.
+fn score_err(d: usize, q_norm: f64, x_norm_max: f64) -> f64 {
+    let u = f64::from(f32::EPSILON) / 2.0;
+    let tiny = f64::from(f32::MIN_POSITIVE);
+    let df = d as f64;
+    (df + 2.0) * u * (q_norm + x_norm_max)
+        + 2.0 * tiny * (df.sqrt() * (q_norm.sqrt() + x_norm_max.sqrt()) + 2.0 * df + 4.0)
+}
+
+/// Largest magnitude [`power_of_two_scale`] leaves alone (2³⁰), and its
+/// reciprocal the smallest.
+const F32_COMFORT: f64 = 1_073_741_824.0;
+
+/// A power of two that brings the largest finite coordinate magnitude of
+/// both sets into [1, 2) (at most 2¹⁰⁰⁰: subnormal ones stay below), when it lies outside [2⁻³⁰, 2³⁰] (else `None`:
+/// the common case costs one pass over the data). Exact in f64: the
+/// scaled distances are the original ones times the square of the scale,
+/// wherever neither underflows (coordinates more than 2⁵⁰⁰ below the
+/// largest).
+fn power_of_two_scale(data: &DMatrix<f64>, queries: &DMatrix<f64>) -> Option<f64> {
+    let max = data
+        .iter()
+        .chain(queries.iter())
+        .filter(|v| v.is_finite())
+        .fold(0.0f64, |a, &b| a.max(b.abs()));
+    if max == 0.0 || (1.0 / F32_COMFORT..=F32_COMFORT).contains(&max) {
+        return None;
+    }
+    // max = m 2^e with m in [1, 2): scale by 2^-e, at most by 2^1000 (a
+    // subnormal max then lands near 2^-60, still far inside f32's range).
+    let biased = ((max.to_bits() >> 52) & 0x7ff) as i32;
+    let e = (biased - 1023).max(-1000);
+    Some(2f64.powi(-e))
 }
 
 dispatched! {
@@ -648,7 +708,6 @@ dispatched! {
     /// distance is computed directly.
     fn prefix_block(this: &Prefix, q0: usize, rows: usize, work: &mut PrefixWork) -> Vec<usize> {
         let (d, m, nx) = (this.d, this.m, this.xn32.len());
-        let u = f64::from(f32::EPSILON) / 2.0;
         let mut last = usize::MAX;
         let mut cand: Vec<(f32, u32)> = Vec::new();
         // Candidates of every query (flat, with offsets) and the best row
@@ -671,11 +730,11 @@ dispatched! {
             let qm_norm: f64 = qi[..m].iter().map(|v| v * v).sum();
             let col = &work.s.col_as_slice(i)[..nx];
             // Rounding of a computed score: the f32 inputs and dot product
-            // ((m + 2) u |q||x| twice), |x_m|² to f32 and the subtraction;
-            // doubled for safety.
-            let err = 2.0 * (m as f64 + 5.0) * u * (qm_norm + this.xm_norm_max);
+            // ([`score_err`]), |x_m|² to f32 and the subtraction (three
+            // more roundings, at most one more flush); doubled for safety.
+            let err = 2.0 * score_err(m + 3, qm_norm, this.xm_norm_max);
             let bar = |ub: f64| {
-                let bar = ub * (1.0 + 1e-12) - qm_norm + err + 1e-300;
+                let bar = ub * (1.0 + 1e-12) - qm_norm + err;
                 let b32 = bar as f32;
                 if f64::from(b32) < bar { b32.next_up() } else { b32 }
             };
@@ -741,7 +800,7 @@ dispatched! {
                 let cands = &flat[offsets[i]..offsets[i + 1]];
                 let score = |p: u32| this.x_norm[p as usize] - 2.0 * f64::from(col[work.slot[p as usize] as usize]);
                 let low = cands.iter().map(|&p| score(p)).fold(f64::INFINITY, f64::min);
-                let band = 4.0 * (d as f64 + 2.0) * u * (q_norm + this.x_norm_max) + 1e-300;
+                let band = 4.0 * score_err(d, q_norm, this.x_norm_max);
                 for &p in cands {
                     if score(p) <= low + band {
                         consider(this, qi, p as usize, best);
@@ -1032,7 +1091,6 @@ fn tree_search(data: &DMatrix<f64>, queries: &DMatrix<f64>) -> Vec<usize> {
         .chunks(d)
         .map(|c| c.iter().map(|v| v * v).sum())
         .collect();
-    let u = f64::from(f32::EPSILON) / 2.0;
     let per_block: Vec<Vec<(usize, usize)>> = cq
         .ranges
         .par_iter()
@@ -1070,7 +1128,7 @@ fn tree_search(data: &DMatrix<f64>, queries: &DMatrix<f64>) -> Vec<usize> {
             // Rounding error of a score, and the band kept for re-checks.
             let err: Vec<f64> = q_norm
                 .iter()
-                .map(|qn| (d as f64 + 2.0) * u * (qn + x_norm_max) + 1e-300)
+                .map(|&qn| score_err(d, qn, x_norm_max))
                 .collect();
             let mut best = vec![f64::INFINITY; len];
             let mut upper = vec![f64::INFINITY; len];
@@ -1202,5 +1260,90 @@ mod tests {
                 "{density}"
             );
         }
+    }
+
+    /// Naive f64 search with the strategies' own f64 distance (the same
+    /// summation order, so that near-ties break alike; ties: the smallest
+    /// index).
+    fn naive(x: &DMatrix<f64>, q: &DMatrix<f64>) -> Vec<usize> {
+        let (xr, qr, d) = (row_major(x, None), row_major(q, None), x.ncols());
+        (0..q.nrows())
+            .map(|i| {
+                let mut best = (f64::INFINITY, 0);
+                for r in 0..x.nrows() {
+                    let dist = dist2(&xr[r * d..(r + 1) * d], &qr[i * d..(i + 1) * d]);
+                    if dist < best.0 {
+                        best = (dist, r);
+                    }
+                }
+                best.1
+            })
+            .collect()
+    }
+
+    /// The f32 strategies are exact on their own, without the power-of-two
+    /// scaling of [`search`], where the cross terms underflow (coordinates
+    /// ~1e-29, products ~1e-57: all flush to zero, so only the band's
+    /// absolute terms keep the nearest row) or where tiny coordinates sit
+    /// next to ordinary ones. A band without [`score_err`]'s absolute
+    /// terms returns wrong rows in the first case.
+    #[test]
+    fn f32_bands_cover_underflow() {
+        let (nx, d) = (300, 40);
+        for (offset, spread) in [(0.0, 1e-30), (0.0, 1e-42), (1.0, 1e-40)] {
+            let x = DMatrix::from_fn(nx, d, |i, j| {
+                offset + spread * (((i * 37 + j * 11) % 101) as f64 - 50.0)
+            });
+            let q = DMatrix::from_fn(120, d, |i, j| {
+                offset + spread * (((i * 53 + j * 7) % 97) as f64 - 48.5)
+            });
+            let want = naive(&x, &q);
+            assert_eq!(brute_search(&x, &q), want, "brute {offset} {spread}");
+            assert_eq!(tree_search(&x, &q), want, "tree {offset} {spread}");
+            assert_eq!(
+                prefix_search(&x, &q, None),
+                want,
+                "prefix {offset} {spread}"
+            );
+        }
+    }
+
+    /// Far outside f32's range (coordinates 1e±30 and 1e±150: underflow
+    /// and overflow of the f32 products and inputs) every strategy agrees with the naive
+    /// search, through the power-of-two scaling.
+    #[test]
+    fn every_strategy_exact_at_extreme_scales() {
+        let (nx, d) = (500, 24);
+        for scale in [1e-30, 1e30, 1e-150, 1e150] {
+            let x = DMatrix::from_fn(nx, d, |i, j| {
+                scale * ((i * 37 + j * 11) % 101) as f64 / 101.0
+            });
+            let q = DMatrix::from_fn(300, d, |i, j| scale * ((i * 53 + j * 7) % 97) as f64 / 97.0);
+            let want = naive(&x, &q);
+            for strategy in [
+                NnStrategy::Auto,
+                NnStrategy::Brute,
+                NnStrategy::Tree,
+                NnStrategy::Prefix,
+                NnStrategy::Tiles,
+            ] {
+                assert_eq!(
+                    nearest_rows_with(&x, &q, strategy),
+                    want,
+                    "{strategy:?} at {scale:e}"
+                );
+            }
+        }
+        let zero = DMatrix::zeros(1, 2);
+        assert_eq!(
+            power_of_two_scale(&DMatrix::from_element(2, 2, 3.0), &zero),
+            None
+        );
+        for v in [3e-300, 7e300, f64::MAX] {
+            let s = power_of_two_scale(&DMatrix::from_element(2, 2, v), &zero).unwrap();
+            assert!((1.0..2.0).contains(&(v * s)), "{v:e}: {}", v * s);
+        }
+        let s = power_of_two_scale(&DMatrix::from_element(2, 2, 5e-320), &zero).unwrap();
+        assert!((1e-20..1e-15).contains(&(5e-320 * s)), "{}", 5e-320 * s);
     }
 }

@@ -185,6 +185,11 @@ fn prefix_search_equals_brute_force_whatever_the_guesses() {
 /// could overflow (1e16, handed to brute force): the exact answer.
 #[test]
 fn tiles_exact_where_bf16_is_coarse_or_out_of_range() {
+    if !tiles_available() {
+        eprintln!(
+            "note: no AMX tiles here (or FMAPS_NO_AMX is set): NnStrategy::Tiles is checked through its brute-force fallback"
+        );
+    }
     for (offset, spread) in [(1e3, 1e-3), (1.0, 3e-3), (1e16, 1e13), (0.0, 1e-30)] {
         let (nx, d) = (300, 40);
         let x = DMatrix::from_fn(nx, d, |i, j| {
