@@ -22,13 +22,30 @@ use std::time::Instant;
 use anyhow::{Context, bail};
 use fmaps::eval::{Collection, EvalParams, evaluate};
 use fmaps::geodesic::ExactSolver;
+use fmaps::nn::{NnParams, NnStrategy, view};
 use fmaps::pipeline::{MatchParams, match_prepared, prepare};
 use fmaps::refine::{Icp, Refiner, ZoomOut};
-use fmaps::solve::{NnStrategy, nearest_rows_hinted, nearest_rows_with};
+
 use nalgebra::DMatrix;
 use serde_json::json;
 
 use crate::util::{data_dir, median, peer_python, peers_dir, root, run};
+
+/// The exact nearest rows with `strategy` and optional guesses.
+fn nearest(
+    data: &DMatrix<f64>,
+    queries: &DMatrix<f64>,
+    hint: Option<&[usize]>,
+    strategy: NnStrategy,
+) -> Vec<usize> {
+    fmaps::nn::nearest_rows(
+        view(data),
+        view(queries),
+        hint,
+        &NnParams::with_strategy(strategy),
+    )
+    .expect("rows of equal length")
+}
 
 /// Options of `cargo xtask bench-refine`.
 #[derive(clap::Args)]
@@ -229,42 +246,43 @@ pub fn bench_refine(args: &Args) -> anyhow::Result<()> {
         let queries = basis_2.eigenvectors.columns(0, k).into_owned();
         let (t_tree, i_tree) = pool.install(|| {
             time(args.bench.repeat, || {
-                nearest_rows_with(&data, &queries, NnStrategy::Tree)
+                nearest(&data, &queries, None, NnStrategy::Tree)
             })
         });
         let (t_brute, i_brute) = pool.install(|| {
             time(args.bench.repeat, || {
-                nearest_rows_with(&data, &queries, NnStrategy::Brute)
+                nearest(&data, &queries, None, NnStrategy::Brute)
             })
         });
         let (t_prefix, i_prefix) = pool.install(|| {
             time(args.bench.repeat, || {
-                nearest_rows_with(&data, &queries, NnStrategy::Prefix)
+                nearest(&data, &queries, None, NnStrategy::Prefix)
             })
         });
         let (t_tiles, i_tiles) = pool.install(|| {
             time(args.bench.repeat, || {
-                nearest_rows_with(&data, &queries, NnStrategy::Tiles)
+                nearest(&data, &queries, None, NnStrategy::Tiles)
             })
         });
         let (t_auto, i_auto) = pool.install(|| {
             time(args.bench.repeat, || {
-                nearest_rows_with(&data, &queries, NnStrategy::Auto)
+                nearest(&data, &queries, None, NnStrategy::Auto)
             })
         });
         // As inside ZoomOut: the previous iteration's answer (here the
         // same map at k - 5) as guesses.
         let guess = pool.install(|| {
             let kp = k - 5;
-            nearest_rows_with(
+            nearest(
                 &data.columns(0, kp).into_owned(),
                 &queries.columns(0, kp).into_owned(),
+                None,
                 NnStrategy::Auto,
             )
         });
         let (t_hinted, i_hinted) = pool.install(|| {
             time(args.bench.repeat, || {
-                nearest_rows_hinted(&data, &queries, &guess)
+                nearest(&data, &queries, Some(&guess), NnStrategy::Auto)
             })
         });
         let (dp, qp) = (

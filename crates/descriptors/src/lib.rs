@@ -31,6 +31,7 @@
 //! # Ok::<(), fmaps_descriptors::Error>(())
 //! ```
 #![deny(missing_docs)]
+#![forbid(unsafe_code)]
 
 use nalgebra::{DMatrix, DVector};
 

@@ -51,6 +51,7 @@
 //!   (Debian: `libarpack2-dev pkg-config libclang-dev`; install
 //!   `libopenblas0-pthread` too, or ARPACK runs on the slow reference BLAS).
 #![deny(missing_docs)]
+#![deny(unsafe_code)]
 
 mod dense;
 mod error;
@@ -59,6 +60,8 @@ mod native;
 mod verify;
 
 #[cfg(feature = "arpack")]
+// The ARPACK binding is the one module of this crate that calls C.
+#[allow(unsafe_code)]
 mod arpack;
 
 use nalgebra::{DMatrix, DVector};

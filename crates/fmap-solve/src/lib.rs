@@ -29,14 +29,12 @@
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
 #![deny(missing_docs)]
+#![forbid(unsafe_code)]
 
 mod chol;
 mod energy;
-mod nn;
 mod normal;
 mod operators;
-mod simd;
-mod tiles;
 mod types;
 mod weights;
 
@@ -46,10 +44,6 @@ use nalgebra::DMatrix;
 pub use energy::{
     FmapEnergy, OperatorPairs, SolveMethod, SolveReport, laplacian_mask, multiplication_operator,
     resolvent_mask,
-};
-pub use nn::{
-    NnStrategy, PREFIX_DIM, PREFIX_MIN, nearest_rows, nearest_rows_hinted,
-    nearest_rows_hinted_with, nearest_rows_in, nearest_rows_with, tiles_available,
 };
 pub use operators::{multiplication_operators, orientation_operators};
 pub use types::{FunctionalMap, PointMap};
@@ -77,6 +71,9 @@ pub enum Error {
         "the functional-map energy has no unique minimum (normal equations not positive definite); add descriptors or a positive Laplacian weight"
     )]
     NotPositiveDefinite,
+    /// The nearest-neighbour search refused its input (empty shapes).
+    #[error("nearest-neighbour search: {0}")]
+    Search(fmaps_nn::Error),
     /// A point map refers to a vertex that does not exist.
     #[error("point map entry {at} is {index}, but the target shape has {n} vertices")]
     IndexOutOfRange {
@@ -129,7 +126,7 @@ pub fn point_map_from_fmap(
     let (kb, ka) = check_fmap(c_ab, basis_a, basis_b)?;
     let emb_a = basis_a.eigenvectors.columns(0, ka) * c_ab.transpose(); // n_A x k_B
     let emb_b = basis_b.eigenvectors.columns(0, kb).into_owned();
-    Ok(nearest_rows(&emb_a, &emb_b))
+    nearest(&emb_a, &emb_b)
 }
 
 /// The adjoint conversion: `T_BA(y) = argmin_x ‖Φ_A(x)ᵀ − C_ABᵀ Φ_B(y)ᵀ‖`,
@@ -142,7 +139,19 @@ pub fn point_map_from_fmap_adjoint(
     let (kb, ka) = check_fmap(c_ab, basis_a, basis_b)?;
     let emb_a = basis_a.eigenvectors.columns(0, ka).into_owned();
     let emb_b = basis_b.eigenvectors.columns(0, kb) * c_ab; // n_B x k_A
-    Ok(nearest_rows(&emb_a, &emb_b))
+    nearest(&emb_a, &emb_b)
+}
+
+/// The exact nearest rows ([`fmaps_nn::nearest_rows`]); the sizes were
+/// checked by the caller.
+fn nearest(data: &DMatrix<f64>, queries: &DMatrix<f64>) -> Result<Vec<usize>> {
+    fmaps_nn::nearest_rows(
+        fmaps_nn::view(data),
+        fmaps_nn::view(queries),
+        None,
+        &fmaps_nn::NnParams::default(),
+    )
+    .map_err(Error::Search)
 }
 
 /// Transfers functions on A (n_A x d) to B through `c_ab`:

@@ -42,7 +42,6 @@
 use faer::linalg::matmul::matmul;
 use faer::reborrow::{Reborrow, ReborrowMut};
 use faer::{Accum, Mat, MatMut, MatRef, Par};
-use std::mem::MaybeUninit;
 
 use rayon::prelude::*;
 
@@ -333,7 +332,7 @@ impl Normal {
 
     /// H over the free unknowns in f32, column-major n x n: the lower
     /// triangle, zeros above it. Every element of `h` is written.
-    fn assemble_f32(&self, h: &mut [MaybeUninit<f32>]) {
+    fn assemble_f32(&self, h: &mut [f32]) {
         let (ka, kb, j0, p) = (self.ka, self.kb, self.j0, self.p);
         let n = self.n();
         assert_eq!(h.len(), n * n);
@@ -401,9 +400,7 @@ impl Normal {
                 let nj = ka - l;
                 for r in 0..kb {
                     let col = &mut slab[r * n..(r + 1) * n];
-                    for v in &mut col[..kb * lf] {
-                        v.write(0.0);
-                    }
+                    col[..kb * lf].fill(0.0);
                     for jj in 0..nj {
                         let j = jj + l;
                         let gc = &g.col(c0 + jj).try_as_col_major().unwrap().as_slice()
@@ -419,9 +416,7 @@ impl Normal {
                             seg[r] += (self.mask[(r, l)] + self.ridge) as f32;
                         }
                         let row0 = kb * (j - j0);
-                        for (d, s) in col[row0..row0 + kb].iter_mut().zip(&seg) {
-                            d.write(*s);
-                        }
+                        col[row0..row0 + kb].copy_from_slice(&seg);
                     }
                 }
                 c0 += nj;
@@ -435,18 +430,12 @@ impl Normal {
     /// separate zeroing pass: every element is written once.
     fn assembled_f32(&self) -> (Vec<f32>, usize) {
         let len = self.n() * self.n();
-        let mut buf: Vec<f32> = Vec::with_capacity(len + 16);
+        // Zeroed by the allocator (fresh pages from the OS for a matrix of
+        // this size: no zeroing pass), then every element of the body
+        // written once.
+        let mut buf = vec![0.0f32; len + 16];
         let off = ((64 - buf.as_ptr() as usize % 64) % 64) / 4;
-        let spare = &mut buf.spare_capacity_mut()[..len + 16];
-        let (head, rest) = spare.split_at_mut(off);
-        let (body, tail) = rest.split_at_mut(len);
-        for v in head.iter_mut().chain(tail) {
-            v.write(0.0);
-        }
-        self.assemble_f32(body);
-        // SAFETY: the first len + 16 elements were all written just above
-        // (assemble_f32 writes every element of its slice).
-        unsafe { buf.set_len(len + 16) };
+        self.assemble_f32(&mut buf[off..off + len]);
         (buf, off)
     }
 

@@ -31,6 +31,7 @@
 //! # Ok::<(), fmaps::eigensolve::Error>(())
 //! ```
 #![deny(missing_docs)]
+#![forbid(unsafe_code)]
 
 pub mod npy;
 pub mod pictures;
@@ -44,6 +45,7 @@ pub use fmaps_eval as eval;
 pub use fmaps_geodesic as geodesic;
 pub use fmaps_laplacian as laplacian;
 pub use fmaps_mesh_io as mesh_io;
+pub use fmaps_nn as nn;
 pub use fmaps_refine as refine;
 pub use fmaps_solve as solve;
 pub use fmaps_viz as viz;

@@ -1,4 +1,5 @@
 //! The `fmaps` command-line tool.
+#![forbid(unsafe_code)]
 
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;

@@ -34,6 +34,7 @@
 //! # Ok::<(), fmaps_geodesic::Error>(())
 //! ```
 #![deny(missing_docs)]
+#![forbid(unsafe_code)]
 
 mod exact;
 mod heat;

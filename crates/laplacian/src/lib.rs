@@ -40,6 +40,7 @@
 //! A. Barr, "Discrete differential-geometry operators for triangulated
 //! 2-manifolds", 2003 (mixed Voronoi area, Fig. 4).
 #![deny(missing_docs)]
+#![forbid(unsafe_code)]
 
 mod intrinsic;
 

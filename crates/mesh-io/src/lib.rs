@@ -43,6 +43,7 @@
 //!
 //! - `serde`: derives `Serialize` for [`MeshReport`].
 #![deny(missing_docs)]
+#![forbid(unsafe_code)]
 
 mod corres;
 mod creature;

@@ -7,7 +7,7 @@ use nalgebra::DMatrix;
 
 use crate::linalg::{Rows, nearest_orthonormal, point_map, pullback};
 use crate::{Error, Iteration, RefineReport, Refined, Refiner, Result, check_k, count_changed};
-use fmaps_solve::NnStrategy;
+use fmaps_nn::NnStrategy;
 
 /// ICP in the spectral domain: alternate `T_BA = NN(C)` and
 /// `C ← U Vᵀ` for the SVD `U Σ Vᵀ` of `Φ_Bᵀ M_B Π_BA Φ_A`, at the input's
@@ -75,24 +75,24 @@ impl Refiner for Icp {
         // whose early maps are noisy (measured: 21% less NN time at k =
         // 50; the tree is better up to 48 dimensions).
         let dim = if self.adjoint { ka } else { kb };
-        let strategy = if dim > 48 && !fmaps_solve::tiles_available() {
+        let strategy = if dim > 48 && !fmaps_nn::tiles_available() {
             NnStrategy::Prefix
         } else {
             NnStrategy::Auto
         };
         let nn = |c: &DMatrix<f64>, hint: Option<&[usize]>, report: &mut RefineReport| {
             let t = Instant::now();
-            let map = point_map(c, phi_a, phi_b, self.adjoint, hint, strategy);
+            let map = point_map(c, phi_a, phi_b, self.adjoint, hint, strategy)?;
             report.nn_searches += 1;
             report.nn_seconds += t.elapsed().as_secs_f64();
-            map
+            Ok::<_, Error>(map)
         };
         let mut c = c_ab.clone();
-        let mut t_ba = nn(&c, None, &mut report);
+        let mut t_ba = nn(&c, None, &mut report)?;
         for _ in 0..self.max_iterations {
             let ti = Instant::now();
             c = nearest_orthonormal(pullback(&t_ba, phi_a, ka, phi_b, kb, mass_b));
-            let next = nn(&c, Some(&t_ba), &mut report);
+            let next = nn(&c, Some(&t_ba), &mut report)?;
             let changed = count_changed(Some(&t_ba), &next);
             t_ba = next;
             report.iterations.push(Iteration {

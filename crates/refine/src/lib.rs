@@ -17,7 +17,7 @@
 //!
 //! Both implement [`Refiner`], so a pipeline swaps one for the other (or
 //! for its own) through a trait object. Every nearest-neighbour search is
-//! exact ([`fmaps_solve::nearest_rows`]), so the results are deterministic
+//! exact ([`fmaps_nn::nearest_rows`]), so the results are deterministic
 //! and independent of the thread count.
 //!
 //! ```
@@ -38,6 +38,7 @@
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
 #![deny(missing_docs)]
+#![forbid(unsafe_code)]
 
 mod icp;
 mod linalg;
@@ -100,6 +101,9 @@ pub enum Error {
     /// A conversion failed (sizes).
     #[error(transparent)]
     Solve(#[from] fmaps_solve::Error),
+    /// The nearest-neighbour search refused its input (empty shapes).
+    #[error(transparent)]
+    Search(#[from] fmaps_nn::Error),
 }
 
 /// Result alias of this crate.

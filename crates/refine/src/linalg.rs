@@ -6,7 +6,7 @@
 
 use faer::linalg::matmul::matmul;
 use faer::{Accum, Mat, MatMut, MatRef, Par};
-use fmaps_solve::{NnStrategy, nearest_rows_in};
+use fmaps_nn::{NnParams, NnStrategy, nearest_rows};
 use nalgebra::DMatrix;
 use rayon::prelude::*;
 
@@ -113,8 +113,9 @@ pub(crate) fn point_map(
     adjoint: bool,
     hint: Option<&[usize]>,
     strategy: NnStrategy,
-) -> Vec<usize> {
+) -> Result<Vec<usize>, fmaps_nn::Error> {
     let (kb, ka) = c_ab.shape();
+    let params = NnParams::with_strategy(strategy);
     let c = MatRef::from_column_major_slice(c_ab.as_slice(), kb, ka);
     // One guess per query (a vertex of B) or none.
     let hint = hint.filter(|h| h.len() == phi_b.n());
@@ -122,12 +123,12 @@ pub(crate) fn point_map(
         // n_B x k_A
         let queries = product_rows(phi_b.view(kb), c);
         let queries = MatRef::from_row_major_slice(&queries, phi_b.n(), ka);
-        nearest_rows_in(phi_a.view(ka), queries, hint, strategy)
+        nearest_rows(phi_a.view(ka), queries, hint, &params)
     } else {
         // n_A x k_B
         let data = product_rows(phi_a.view(ka), c.transpose());
         let data = MatRef::from_row_major_slice(&data, phi_a.n(), kb);
-        nearest_rows_in(data, phi_b.view(kb), hint, strategy)
+        nearest_rows(data, phi_b.view(kb), hint, &params)
     }
 }
 

@@ -7,7 +7,7 @@ use nalgebra::DMatrix;
 
 use crate::linalg::{Rows, gather_rhs, gram, point_map, pullback};
 use crate::{Error, Iteration, RefineReport, Refined, Refiner, Result, check_k, count_changed};
-use fmaps_solve::NnStrategy;
+use fmaps_nn::NnStrategy;
 
 /// Vertices of A and of B on which the ZoomOut iterations run (the paper's
 /// fast variant); typically a few thousand farthest points per shape
@@ -219,10 +219,10 @@ impl Refiner for ZoomOut {
         };
         let mut nn = |c: &DMatrix<f64>, data: &Rows, queries: &Rows, hint: Option<&[usize]>| {
             let t = Instant::now();
-            let map = point_map(c, data, queries, self.adjoint, hint, NnStrategy::Auto);
+            let map = point_map(c, data, queries, self.adjoint, hint, NnStrategy::Auto)?;
             report.nn_searches += 1;
             report.nn_seconds += t.elapsed().as_secs_f64();
-            map
+            Ok::<_, Error>(map)
         };
         let k0 = self.k_start;
         let mut c = c_ab.view((0, 0), (k0, k0)).into_owned();
@@ -231,11 +231,11 @@ impl Refiner for ZoomOut {
         let mut iterations = Vec::new();
         for k in self.schedule() {
             let ti = Instant::now();
-            let t_ba = nn(&c, &side_a.phi, &side_b.phi, prev.as_deref());
+            let t_ba = nn(&c, &side_a.phi, &side_b.phi, prev.as_deref())?;
             let mut next = fit(&t_ba, &side_a, k, &side_b, k)?;
             if self.bijective {
                 let ct = c.transpose();
-                let t_ab = nn(&ct, &side_b.phi, &side_a.phi, prev_ab.as_deref());
+                let t_ab = nn(&ct, &side_b.phi, &side_a.phi, prev_ab.as_deref())?;
                 let c_ba = fit(&t_ab, &side_b, k, &side_a, k)?;
                 prev_ab = Some(t_ab);
                 next = (next + c_ba.transpose()) * 0.5;
@@ -254,9 +254,9 @@ impl Refiner for ZoomOut {
                 || Rows::of(&basis_a.eigenvectors, kf, None),
                 || Rows::of(&basis_b.eigenvectors, kf, None),
             );
-            nn(&c, &all_a, &all_b, None)
+            nn(&c, &all_a, &all_b, None)?
         } else {
-            nn(&c, &side_a.phi, &side_b.phi, prev.as_deref())
+            nn(&c, &side_a.phi, &side_b.phi, prev.as_deref())?
         };
         report.iterations = iterations;
         report.converged = true;

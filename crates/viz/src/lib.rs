@@ -25,6 +25,7 @@
 //! # Ok::<(), fmaps_viz::Error>(())
 //! ```
 #![deny(missing_docs)]
+#![forbid(unsafe_code)]
 
 mod color;
 mod image;

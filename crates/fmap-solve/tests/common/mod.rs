@@ -1,5 +1,5 @@
 //! Shared test shapes: a torus with per-vertex pseudo-random scaling (no
-//! symmetry left) and its eigenbasis; a naive nearest-row search.
+//! symmetry left) and its eigenbasis.
 
 // Each test binary uses some of these helpers.
 #![allow(dead_code)]
@@ -28,17 +28,4 @@ pub fn basis(mesh: &TriMesh, k: usize) -> SpectralBasis {
             k,
         )
         .unwrap()
-}
-
-/// The nearest row of each query by direct f64 distances (ties: the
-/// smaller index).
-pub fn naive_nearest(x: &nalgebra::DMatrix<f64>, q: &nalgebra::DMatrix<f64>) -> Vec<usize> {
-    (0..q.nrows())
-        .map(|i| {
-            let dist = |k: usize| (x.row(k) - q.row(i)).norm_squared();
-            (0..x.nrows())
-                .min_by(|&a, &b| dist(a).total_cmp(&dist(b)).then(a.cmp(&b)))
-                .unwrap()
-        })
-        .collect()
 }

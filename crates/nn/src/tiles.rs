@@ -42,7 +42,7 @@
 use faer::MatRef;
 use nalgebra::DMatrix;
 
-use crate::nn::Rows;
+use crate::rows::Rows;
 
 /// Whether the matrix-tile search can run here (detected once).
 pub fn available() -> bool {
@@ -112,8 +112,8 @@ mod imp {
     }
 
     pub fn search(
-        _data: crate::nn::Rows<'_>,
-        _queries: crate::nn::Rows<'_>,
+        _data: crate::rows::Rows<'_>,
+        _queries: crate::rows::Rows<'_>,
         _hint: Option<&[usize]>,
     ) -> Option<Vec<usize>> {
         None
@@ -129,7 +129,7 @@ mod imp {
     use rayon::prelude::*;
 
     use super::{from_bf16, to_bf16};
-    use crate::nn::{Rows, dist2_below};
+    use crate::rows::{Rows, dist2_below};
 
     /// Queries per tile block (two tiles of 16 columns).
     const QT: usize = 32;

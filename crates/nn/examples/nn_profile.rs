@@ -1,11 +1,11 @@
 //! Times one nearest-neighbour strategy on saved embeddings (as written
 //! by `cargo xtask bench-refine`, float64 `.npy`), for profiling:
-//! `cargo run --release -p fmaps-solve --example nn_profile --
+//! `cargo run --release -p fmaps-nn --example nn_profile --
 //! target/bench/refine/data150.npy target/bench/refine/query150.npy tiles 20
 //! [hint]`.
 use std::time::Instant;
 
-use fmaps_solve::{NnStrategy, nearest_rows_hinted_with, nearest_rows_with};
+use fmaps_nn::{NnParams, NnStrategy, cpu_features, nearest_rows, view};
 use nalgebra::DMatrix;
 
 /// A float64 `.npy` matrix (either order).
@@ -47,22 +47,30 @@ fn main() {
     let reps: usize = args.get(4).map_or(10, |s| s.parse().expect("a count"));
     // `hint` as a fifth argument: the answer itself as guesses (as late in
     // ZoomOut and ICP).
-    let hint = (args.get(5).map(|s| s.as_str()) == Some("hint"))
-        .then(|| nearest_rows_with(&data, &queries, NnStrategy::Brute));
+    let search = |hint: Option<&[usize]>, strategy| {
+        nearest_rows(
+            view(&data),
+            view(&queries),
+            hint,
+            &NnParams::with_strategy(strategy),
+        )
+        .expect("rows of equal length")
+    };
+    let hint =
+        (args.get(5).map(|s| s.as_str()) == Some("hint")).then(|| search(None, NnStrategy::Brute));
     let t = Instant::now();
     let mut sum = 0usize;
     for _ in 0..reps {
-        let found = match &hint {
-            Some(h) => nearest_rows_hinted_with(&data, &queries, h, strategy),
-            None => nearest_rows_with(&data, &queries, strategy),
-        };
+        let found = search(hint.as_deref(), strategy);
         sum += found.iter().sum::<usize>();
     }
     println!(
-        "{strategy:?}: {:.4} s per search ({} x {} among {}, checksum {sum})",
+        "{strategy:?}: {:.4} s per search ({} x {} among {}, checksum {sum}; {}, {} threads)",
         t.elapsed().as_secs_f64() / reps as f64,
         queries.nrows(),
         queries.ncols(),
-        data.nrows()
+        data.nrows(),
+        cpu_features(),
+        rayon::current_num_threads()
     );
 }

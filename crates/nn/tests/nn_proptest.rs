@@ -5,9 +5,9 @@
 //! guesses that are right, wrong or out of range.
 
 mod common;
-use common::naive_nearest;
+use common::{naive_nearest, nearest_rows_hinted_with, nearest_rows_with};
 use faer::MatRef;
-use fmaps_solve::{NnStrategy, nearest_rows_hinted_with, nearest_rows_in, nearest_rows_with};
+use fmaps_nn::{NnParams, NnStrategy, nearest_rows};
 use nalgebra::DMatrix;
 use proptest::prelude::*;
 
@@ -20,6 +20,11 @@ fn stream(seed: u64) -> impl FnMut() -> f64 {
             .wrapping_add(1442695040888963407);
         (s >> 11) as f64 / (1u64 << 53) as f64
     }
+}
+
+#[test]
+fn tiles_note() {
+    common::note_if_no_tiles("every_strategy_is_exact");
 }
 
 proptest! {
@@ -80,8 +85,8 @@ proptest! {
         let qv = MatRef::from_row_major_slice_with_stride(&qw, nq, d, wq);
         let xc = MatRef::from_column_major_slice(x.as_slice(), nx, d);
         for strategy in [NnStrategy::Auto, NnStrategy::Brute, NnStrategy::Tiles] {
-            prop_assert_eq!(&nearest_rows_in(xv, qv, None, strategy), &want, "{:?} on row views", strategy);
-            prop_assert_eq!(&nearest_rows_in(xc, qv, Some(&guesses), strategy), &want, "{:?} on mixed views", strategy);
+            prop_assert_eq!(&nearest_rows(xv, qv, None, &NnParams::with_strategy(strategy)).unwrap(), &want, "{:?} on row views", strategy);
+            prop_assert_eq!(&nearest_rows(xc, qv, Some(&guesses), &NnParams::with_strategy(strategy)).unwrap(), &want, "{:?} on mixed views", strategy);
         }
     }
 }

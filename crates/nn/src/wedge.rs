@@ -1,6 +1,7 @@
-//! Small numeric kernels compiled for the CPU's vector extensions (the
-//! crate is built for baseline x86-64, SSE2), chosen at run time (the
-//! detection is cached by the standard library): a portable
+//! The wedge sums of `fmaps-solve`'s orientation operators, a small
+//! numeric kernel compiled for the CPU's vector extensions (the crate is
+//! built for baseline x86-64, SSE2), chosen at run time (the detection is
+//! cached by the standard library): a portable
 //! `#[inline(always)]` body instantiated inside a `#[target_feature]`
 //! function for AVX2+FMA and used as is for the baseline, and, where
 //! register tiling matters, an AVX-512 version written with intrinsics.
@@ -16,11 +17,16 @@ fn fma<const FUSED: bool>(a: f64, b: f64, c: f64) -> f64 {
 /// `next[f]` of `rows` (row-major, `kp` values per row, the first `k` used)
 /// are the basis values at the previous and next corners of face f.
 #[derive(Clone, Copy)]
-pub(crate) struct Fan<'a> {
+pub struct Fan<'a> {
+    /// Basis values, row-major, `kp` per row.
     pub rows: &'a [f64],
+    /// Values per row of `rows` (padded: a multiple of 8, at least `k`).
     pub kp: usize,
+    /// Basis functions used (the first `k` of each row).
     pub k: usize,
+    /// Per face, the row of its previous corner.
     pub prev: &'a [usize],
+    /// Per face, the row of its next corner.
     pub next: &'a [usize],
 }
 
@@ -49,10 +55,11 @@ fn wedge_sums_body<const FUSED: bool>(fan: &Fan<'_>, out: &mut [f64]) {
     }
 }
 
-/// See [`wedge_sums_body`]. `rows` must hold `kp` values per row with
+/// For j in 1..k, writes `out[j(j−1)/2 + i] = Σ_f P[f,i] N[f,j] − N[f,i] P[f,j]`
+/// for i < j (see the private portable body for the loop). `rows` must hold `kp` values per row with
 /// `kp` a multiple of 8 (the AVX-512 kernel reads whole vectors of 8; the
 /// values past k in each row are read but never affect the output).
-pub(crate) fn wedge_sums(fan: &Fan<'_>, out: &mut [f64]) {
+pub fn wedge_sums(fan: &Fan<'_>, out: &mut [f64]) {
     let (kp, k) = (fan.kp, fan.k);
     assert!(kp.is_multiple_of(8) && kp >= k && fan.prev.len() == fan.next.len());
     let whole_row = |&v: &usize| (v + 1) * kp <= fan.rows.len();
@@ -60,13 +67,12 @@ pub(crate) fn wedge_sums(fan: &Fan<'_>, out: &mut [f64]) {
     assert!(out.len() >= k * k.saturating_sub(1) / 2);
     #[cfg(target_arch = "x86_64")]
     {
-        if std::arch::is_x86_feature_detected!("avx512f") {
+        if crate::cpu::has_v4() {
             // SAFETY: the CPU supports AVX-512F (checked just above); the
             // bounds the kernel relies on are asserted above.
             return unsafe { x86::wedge_sums_avx512(fan, out) };
         }
-        if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma")
-        {
+        if crate::cpu::has_v3() {
             // SAFETY: the CPU supports AVX2 and FMA (checked just above).
             return unsafe { x86::wedge_sums_avx2(fan, out) };
         }

@@ -1,0 +1,129 @@
+//! The brute-force search: every query against every data row.
+
+use faer::linalg::matmul::matmul;
+use faer::{Accum, Mat, MatRef, Par};
+use nalgebra::DMatrix;
+use rayon::prelude::*;
+
+use crate::rows::{dist2_below, row_major};
+
+/// Queries per block.
+const BLOCK: usize = 256;
+
+/// Every query against every data row: blocked f32 GEMMs select the rows
+/// within [`score_err`]'s band of the best score, re-checked in f64.
+/// Exact at any scale (the band covers underflow); fast where the
+/// coordinates are well inside f32's range.
+pub(crate) fn brute_search(data: &DMatrix<f64>, queries: &DMatrix<f64>) -> Vec<usize> {
+    let (nx, d) = (data.nrows(), data.ncols());
+    // Row-major copies: each row contiguous, for the direct re-checks.
+    let x_rows = row_major(data, None);
+    let x_norm: Vec<f64> = x_rows
+        .chunks(d.max(1))
+        .map(|r| r.iter().map(|v| v * v).sum())
+        .collect();
+    let x_norm_max = x_norm.iter().fold(0.0f64, |a, &b| a.max(b));
+    let x32: Vec<f32> = data.as_slice().iter().map(|&v| v as f32).collect();
+    let x_mat = MatRef::from_column_major_slice(&x32, nx, d);
+    let q_rows = row_major(queries, None);
+    let nq = queries.nrows();
+    let starts: Vec<usize> = (0..nq).step_by(BLOCK).collect();
+    let blocks: Vec<Vec<usize>> = starts
+        .par_iter()
+        .map_init(
+            || Mat::<f32>::zeros(nx, BLOCK),
+            |buf, &q0| {
+                let rows = BLOCK.min(nq - q0);
+                let q = Mat::<f32>::from_fn(rows, d, |i, j| queries[(q0 + i, j)] as f32);
+                // Sᵀ = X Qᵀ (nx x rows): column i holds query i's cross
+                // terms, contiguous for the scans.
+                matmul(
+                    buf.as_mut().subcols_mut(0, rows),
+                    Accum::Replace,
+                    x_mat,
+                    q.transpose(),
+                    1.0f32,
+                    Par::Seq,
+                );
+                let mut out = Vec::with_capacity(rows);
+                for i in 0..rows {
+                    let qi = &q_rows[(q0 + i) * d..(q0 + i + 1) * d];
+                    let q_norm: f64 = qi.iter().map(|v| v * v).sum();
+                    let band = 4.0 * score_err(d, q_norm, x_norm_max);
+                    let col = &buf.col_as_slice(i)[..nx];
+                    out.push(brute_query(&x_rows, &x_norm, col, qi, band));
+                }
+                out
+            },
+        )
+        .collect();
+    blocks.into_iter().flatten().collect()
+}
+
+/// A bound on the error of a score `|x|² − 2 q·x` whose cross term is
+/// computed from f32 copies of `q` and `x` by a length-`d` f32 dot product
+/// (`q_norm` = |q|², `x_norm_max` ≥ |x|²), with the norms exact:
+/// relative rounding, `(d + 2) u |q||x|` for the dot product (u = 2⁻²⁴),
+/// twice, folded with `2|q||x| ≤ |q|² + |x|²`; and the absolute errors that
+/// relative rounding does not cover, each at most f32's smallest normal λ
+/// (flushed to zero or gradually underflowed): coordinates converted below
+/// the normal range (`√d λ (|q| + |x|)`), products and partial sums (`2 d
+/// λ`), twice, plus a margin.
+pub(crate) fn score_err(d: usize, q_norm: f64, x_norm_max: f64) -> f64 {
+    let u = f64::from(f32::EPSILON) / 2.0;
+    let tiny = f64::from(f32::MIN_POSITIVE);
+    let df = d as f64;
+    (df + 2.0) * u * (q_norm + x_norm_max)
+        + 2.0 * tiny * (df.sqrt() * (q_norm.sqrt() + x_norm_max.sqrt()) + 2.0 * df + 4.0)
+}
+
+/// Largest magnitude [`power_of_two_scale`] leaves alone (2³⁰), and its
+/// reciprocal the smallest.
+pub(crate) const F32_COMFORT: f64 = 1_073_741_824.0;
+
+/// A power of two that brings the largest finite coordinate magnitude of
+/// both sets into [1, 2) (at most 2¹⁰⁰⁰: subnormal ones stay below), when it lies outside [2⁻³⁰, 2³⁰] (else `None`:
+/// the common case costs one pass over the data). Exact in f64: the
+/// scaled distances are the original ones times the square of the scale,
+/// wherever neither underflows (coordinates more than 2⁵⁰⁰ below the
+/// largest).
+pub(crate) fn power_of_two_scale(data: &DMatrix<f64>, queries: &DMatrix<f64>) -> Option<f64> {
+    let max = data
+        .iter()
+        .chain(queries.iter())
+        .filter(|v| v.is_finite())
+        .fold(0.0f64, |a, &b| a.max(b.abs()));
+    if max == 0.0 || (1.0 / F32_COMFORT..=F32_COMFORT).contains(&max) {
+        return None;
+    }
+    // max = m 2^e with m in [1, 2): scale by 2^-e, at most by 2^1000 (a
+    // subnormal max then lands near 2^-60, still far inside f32's range).
+    let biased = ((max.to_bits() >> 52) & 0x7ff) as i32;
+    let e = (biased - 1023).max(-1000);
+    Some(2f64.powi(-e))
+}
+
+crate::cpu::dispatched! {
+    /// The nearest row to `qi` given its cross terms `col` (f32) with every
+    /// row: every row whose score `|x|² − 2 q·x` is within `band` of the
+    /// smallest is re-checked with a direct f64 distance.
+    fn brute_query(x_rows: &[f64], x_norm: &[f64], col: &[f32], qi: &[f64], band: f64) -> usize {
+        let d = qi.len();
+        let mut best = f64::INFINITY;
+        for (xn, c) in x_norm.iter().zip(col) {
+            best = best.min(xn - 2.0 * f64::from(*c));
+        }
+        let mut arg = usize::MAX;
+        let mut best_d = f64::INFINITY;
+        for (k, (xn, c)) in x_norm.iter().zip(col).enumerate() {
+            if xn - 2.0 * f64::from(*c) <= best + band
+                && let Some(dist) = dist2_below(&x_rows[k * d..(k + 1) * d], qi, best_d)
+                && dist < best_d
+            {
+                best_d = dist;
+                arg = k;
+            }
+        }
+        arg
+    }
+}

@@ -1,0 +1,321 @@
+//! Exact nearest neighbours of query rows among data rows, in any
+//! dimension: `|q − x|² = |x|² − 2 q·x + |q|²`. The cross terms are
+//! blocked GEMMs in f32 (faer; twice the f64 throughput), which only
+//! *select candidates*: every data row whose f32 score lies within a
+//! rigorous rounding band of the best one is re-checked with a direct f64
+//! distance, so the result is the true nearest row in f64 (ties: the
+//! smallest index). Memory is bounded by the block size, never
+//! n_queries x n_data.
+//!
+//! In high dimensions most of that work can be skipped ([`NnStrategy::Prefix`]):
+//! spectral embeddings spread mostly along their leading (low-frequency)
+//! coordinates, so the distance over a 40-coordinate prefix, which bounds
+//! the full distance from below, already exceeds the nearest distance for
+//! all but a few percent of the rows. Guesses (the previous iteration's
+//! map in ZoomOut and ICP, the `hint` of [`nearest_rows`]) give the upper bound
+//! that makes this cut sharp. The scans and distance kernels are compiled
+//! for AVX-512 and AVX2 as well and the widest one the CPU has is run.
+//!
+//! On CPUs with matrix tiles (Intel AMX; [`NnStrategy::Tiles`], the
+//! default from 16 dimensions where [`tiles_available`]) every pair is
+//! ranked in bf16 in the full dimension at ~6x the f32 GEMM rate, with a
+//! bound on the bf16 error that is tight within 10% in the worst case
+//! (see the `tiles` module), and the few rows within it re-checked in f64.
+//!
+//! The band: with u = 2⁻²⁴, rounding the inputs to f32 and a length-d dot
+//! product in f32 change `q·x` by at most `(d + 2) u |q| |x|`, so each score
+//! `|x|² − 2 q·x` is off by at most `e = (d + 2) u (|q|² + |x|²)`; the
+//! true nearest row scores within `2 e_max` of the f32 minimum. The band
+//! used is twice that.
+
+//!
+//! The one entry point is [`nearest_rows`]: faer views of any layout in,
+//! optional guesses, knobs in [`NnParams`]:
+//!
+//! ```
+//! use faer::Mat;
+//! use fmaps_nn::{NnParams, nearest_rows};
+//!
+//! // Four points on a line and two queries.
+//! let data = Mat::from_fn(4, 3, |i, j| (i * 10 + j) as f64);
+//! let queries = Mat::from_fn(2, 3, |i, j| (i * 29 + j) as f64 + 0.4);
+//! let nearest = nearest_rows(data.as_ref(), queries.as_ref(), None, &NnParams::default())?;
+//! assert_eq!(nearest, vec![0, 3]);
+//! # Ok::<(), fmaps_nn::Error>(())
+//! ```
+//!
+//! This crate is also the one place of the workspace where CPU features
+//! are detected ([`cpu_features`]) and where `unsafe` code lives (the AMX
+//! tiles, the strided row view, the `#[target_feature]` kernels, among
+//! them [`wedge_sums`] for `fmaps-solve`).
+#![deny(missing_docs)]
+
+mod brute;
+mod cpu;
+mod prefix;
+mod rows;
+mod tiles;
+mod tree;
+mod wedge;
+
+#[cfg(test)]
+mod tests;
+
+use faer::MatRef;
+use nalgebra::DMatrix;
+
+use brute::{brute_search, power_of_two_scale};
+use prefix::{PREFIX_FROM, PREFIX_MAX_ROWS, prefix_search};
+use rows::Rows;
+use tree::{LEAF_DATA, LEAF_QUERY, TREE_MAX_DIM, tree_search};
+
+pub use cpu::{CpuFeatures, cpu_features};
+pub use wedge::{Fan, wedge_sums};
+
+/// Errors of this crate.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[non_exhaustive]
+pub enum Error {
+    /// Data and query rows have different lengths.
+    #[error("data rows have {data} coordinates but query rows have {queries}")]
+    DimensionMismatch {
+        /// Coordinates per data row.
+        data: usize,
+        /// Coordinates per query row.
+        queries: usize,
+    },
+    /// The guesses are not one per query.
+    #[error("{found} guesses for {expected} queries (one per query)")]
+    HintCount {
+        /// Guesses given.
+        found: usize,
+        /// Queries.
+        expected: usize,
+    },
+    /// There are queries but no data rows to find.
+    #[error("{queries} queries but no data rows")]
+    NoData {
+        /// Queries.
+        queries: usize,
+    },
+}
+
+/// Result alias of this crate.
+pub type Result<T, E = Error> = std::result::Result<T, E>;
+
+/// Knobs of [`nearest_rows`]; the answer never depends on them.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[non_exhaustive]
+pub struct NnParams {
+    /// How the search runs ([`NnStrategy::Auto`] by default).
+    pub strategy: NnStrategy,
+}
+
+impl NnParams {
+    /// The default knobs with `strategy`.
+    pub fn with_strategy(strategy: NnStrategy) -> Self {
+        NnParams { strategy }
+    }
+}
+
+/// How [`nearest_rows`] searches; every strategy returns the same,
+/// exact answer.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum NnStrategy {
+    /// The matrix tiles from 16 dimensions where the CPU has them; else
+    /// the tree in dimensions up to 48 when both sets are large enough for
+    /// it to pay, the prefix search from 64 dimensions with guesses, brute
+    /// force otherwise.
+    #[default]
+    Auto,
+    /// Every query against every data row (blocked f32 GEMM).
+    Brute,
+    /// Both sets split into clusters by principal-direction bisection;
+    /// a cluster of queries is compared (f32 GEMM) only with the data
+    /// clusters that the triangle inequality cannot rule out.
+    Tree,
+    /// Every pair is ranked on the leading [`PREFIX_DIM`] coordinates only
+    /// (half of them below 64 dimensions)
+    /// (f32 GEMM of that width); a query's full f64 distance is computed
+    /// only for the rows whose partial distance does not already exceed an
+    /// upper bound of its nearest distance (the best-ranked row's, or the
+    /// hint's when given). Spectral embeddings concentrate their spread in
+    /// the leading (low-frequency) coordinates, so a few percent of the
+    /// rows survive.
+    Prefix,
+    /// Every pair ranked in the full dimension on the CPU's matrix tiles
+    /// (Intel AMX: bf16 products, f32 sums, ~6x the f32 GEMM rate); the
+    /// rows within a rigorous bound of the best are re-checked in f64.
+    /// Brute force where the CPU or the OS does not offer the tiles
+    /// ([`tiles_available`]).
+    Tiles,
+}
+
+/// Whether [`NnStrategy::Tiles`] runs on matrix tiles here (x86-64 Linux
+/// with AMX-BF16, and `FMAPS_NO_AMX` unset); detected once.
+pub fn tiles_available() -> bool {
+    crate::tiles::available()
+}
+
+/// Leading coordinates on which [`NnStrategy::Prefix`] ranks every pair
+/// from 64 dimensions on (below, half of the coordinates, at least
+/// [`PREFIX_MIN`]).
+pub const PREFIX_DIM: usize = 40;
+
+/// Smallest prefix width; the prefix search needs at least twice as many
+/// dimensions.
+pub const PREFIX_MIN: usize = 8;
+
+/// The prefix width used in dimension `d`.
+pub(crate) fn prefix_width(d: usize) -> usize {
+    if d >= PREFIX_FROM {
+        PREFIX_DIM
+    } else {
+        (d / 2).max(PREFIX_MIN)
+    }
+}
+
+/// For every row of `queries` (n_q x d), the index of the nearest row of
+/// `data` (n_x x d) in f64 (ties: the smallest index), whatever the
+/// strategy. `hint`, when given, holds one guess per query (any data row
+/// index, e.g. the previous iteration's answer in ZoomOut or ICP; an index
+/// out of range counts as no guess): a good guess lets the search discard
+/// more rows early, never changes the answer.
+///
+/// Views of any layout are accepted. Where the search runs on the matrix
+/// tiles, views whose rows are contiguous (column stride 1: row-major, or
+/// a leading block of a row-major matrix) are read in place; other
+/// layouts and strategies copy first (`O(n d)`, small next to the search).
+///
+/// Errors: rows of different lengths, a hint count other than one per
+/// query, queries without data rows.
+pub fn nearest_rows(
+    data: MatRef<'_, f64>,
+    queries: MatRef<'_, f64>,
+    hint: Option<&[usize]>,
+    params: &NnParams,
+) -> Result<Vec<usize>> {
+    let (nx, d) = (data.nrows(), data.ncols());
+    if queries.ncols() != d {
+        return Err(Error::DimensionMismatch {
+            data: d,
+            queries: queries.ncols(),
+        });
+    }
+    if let Some(h) = hint
+        && h.len() != queries.nrows()
+    {
+        return Err(Error::HintCount {
+            found: h.len(),
+            expected: queries.nrows(),
+        });
+    }
+    if queries.nrows() == 0 {
+        return Ok(Vec::new());
+    }
+    if nx == 0 {
+        return Err(Error::NoData {
+            queries: queries.nrows(),
+        });
+    }
+    let strategy = params.strategy;
+    let tiles = match strategy {
+        NnStrategy::Tiles => true,
+        NnStrategy::Auto => d >= TILES_FROM && tiles::available(),
+        _ => false,
+    };
+    if tiles && let Some(found) = tiles::search_rows(Rows::of(data), Rows::of(queries), hint) {
+        return Ok(found);
+    }
+    let strategy = if strategy == NnStrategy::Tiles {
+        NnStrategy::Brute
+    } else {
+        strategy
+    };
+    Ok(search(&owned(data), &owned(queries), strategy, hint))
+}
+
+/// A column-major copy of a view (one `memcpy` per column when the
+/// columns are contiguous).
+fn owned(m: MatRef<'_, f64>) -> DMatrix<f64> {
+    let (n, d) = (m.nrows(), m.ncols());
+    let mut out = DMatrix::zeros(n, d);
+    for (j, col) in out.as_mut_slice().chunks_exact_mut(n.max(1)).enumerate() {
+        match m.col(j).try_as_col_major() {
+            Some(c) => col.copy_from_slice(c.as_slice()),
+            None => {
+                for (i, o) in col.iter_mut().enumerate() {
+                    *o = m[(i, j)];
+                }
+            }
+        }
+    }
+    out
+}
+
+/// A faer view of a column-major nalgebra matrix (no copy), for
+/// [`nearest_rows`].
+pub fn view(m: &DMatrix<f64>) -> MatRef<'_, f64> {
+    MatRef::from_column_major_slice(m.as_slice(), m.nrows(), m.ncols())
+}
+
+/// The dispatcher behind [`nearest_rows`] on column-major matrices of
+/// equal width.
+fn search(
+    data: &DMatrix<f64>,
+    queries: &DMatrix<f64>,
+    strategy: NnStrategy,
+    hint: Option<&[usize]>,
+) -> Vec<usize> {
+    let (nx, d) = (data.nrows(), data.ncols());
+    let strategy = match strategy {
+        // The choice follows measurements on FAUST spectral embeddings
+        // (README, "Choosing a strategy"): the tree wins in low dimensions,
+        // the prefix search needs good guesses and a high dimension.
+        NnStrategy::Auto if d >= TILES_FROM && crate::tiles::available() => NnStrategy::Tiles,
+        NnStrategy::Auto => {
+            let prefix =
+                (1024..=PREFIX_MAX_ROWS).contains(&nx) && d >= PREFIX_FROM && hint.is_some();
+            if prefix {
+                NnStrategy::Prefix
+            } else if (1..=TREE_MAX_DIM).contains(&d)
+                && nx >= 4 * LEAF_DATA
+                && queries.nrows() >= 2 * LEAF_QUERY
+            {
+                NnStrategy::Tree
+            } else {
+                NnStrategy::Brute
+            }
+        }
+        s => s,
+    };
+    if strategy == NnStrategy::Tiles
+        && let Some(found) = crate::tiles::search(data, queries, hint)
+    {
+        return found;
+    }
+    // The f32 strategies need coordinates well inside f32's range: far
+    // below it the cross terms underflow (the band then covers every row),
+    // far above it they overflow. Nearest rows do not change when both
+    // sets are scaled by one power of two, which is exact in f64.
+    let scaled = power_of_two_scale(data, queries).map(|s| (data * s, queries * s));
+    let (data, queries) = match &scaled {
+        Some((x, q)) => (x, q),
+        None => (data, queries),
+    };
+    match strategy {
+        NnStrategy::Tree if d > 0 => return tree_search(data, queries),
+        NnStrategy::Prefix if d >= 2 * PREFIX_MIN => return prefix_search(data, queries, hint),
+        _ => {}
+    }
+    brute_search(data, queries)
+}
+
+/// Smallest dimension [`NnStrategy::Auto`] uses the matrix tiles from
+/// (where they are available). Below, the tiles pad every row to 32
+/// coordinates and the tree is about as fast (measured on FAUST
+/// embeddings, one thread, `cargo xtask bench-refine --nn-only` and the
+/// `nn_profile` example: tiles 0.0103 s against the tree's 0.0130 at
+/// d = 10, within ±30% either way at d = 4-8; at d = 30, 0.0099 against
+/// 0.0364).
+const TILES_FROM: usize = 16;

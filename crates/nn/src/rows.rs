@@ -1,0 +1,164 @@
+//! Rows of matrices as contiguous slices, and the f64 distance every
+//! strategy decides with.
+
+use faer::MatRef;
+use nalgebra::DMatrix;
+use rayon::prelude::*;
+
+/// The rows of a matrix, each contiguous: read in place from a view whose
+/// column stride is 1, else copied row-major (in parallel).
+pub(crate) struct Rows<'a> {
+    ptr: *const f64,
+    stride: usize,
+    n: usize,
+    d: usize,
+    /// The copy, when one was made (`ptr` points into it).
+    _owned: Vec<f64>,
+    _view: std::marker::PhantomData<&'a f64>,
+}
+
+// SAFETY: `Rows` only reads, through a shared view or its own copy.
+unsafe impl Send for Rows<'_> {}
+// SAFETY: as above.
+unsafe impl Sync for Rows<'_> {}
+
+impl<'a> Rows<'a> {
+    pub(crate) fn of(m: MatRef<'a, f64>) -> Rows<'a> {
+        let (n, d) = (m.nrows(), m.ncols());
+        let rs = m.row_stride();
+        if n > 0 && d > 0 && m.col_stride() == 1 && rs >= d as isize {
+            return Rows {
+                ptr: m.as_ptr(),
+                stride: rs as usize,
+                n,
+                d,
+                _owned: Vec::new(),
+                _view: std::marker::PhantomData,
+            };
+        }
+        let owned = rows_of(m);
+        Rows {
+            ptr: owned.as_ptr(),
+            stride: d,
+            n,
+            d,
+            _owned: owned,
+            _view: std::marker::PhantomData,
+        }
+    }
+
+    /// Row count and length.
+    pub(crate) fn shape(&self) -> (usize, usize) {
+        (self.n, self.d)
+    }
+
+    /// Row `i`.
+    #[inline(always)]
+    pub(crate) fn row(&self, i: usize) -> &[f64] {
+        assert!(i < self.n, "row {i} of {}", self.n);
+        // SAFETY: row i's d elements are elements of the view (column
+        // stride 1) or of the copy, both alive for 'a / self.
+        unsafe { std::slice::from_raw_parts(self.ptr.add(i * self.stride), self.d) }
+    }
+}
+
+/// `|a − b|²` in f64, summed in eight lanes (vectorised). Every strategy
+/// decides with this one function, so all return the same row.
+#[inline(always)]
+pub(crate) fn dist2(a: &[f64], b: &[f64]) -> f64 {
+    dist2_below(a, b, f64::INFINITY).unwrap_or(f64::NAN)
+}
+
+/// The rows of `m` (in `order` when given), row-major. Tiles of 64 rows
+/// keep both the column reads and the row writes in cache.
+pub(crate) fn row_major(m: &DMatrix<f64>, order: Option<&[usize]>) -> Vec<f64> {
+    let (n, d) = m.shape();
+    let t = rows_of(MatRef::from_column_major_slice(m.as_slice(), n, d));
+    match order {
+        None => t,
+        Some(order) => {
+            let mut out = vec![0.0; n * d];
+            for (dst, &i) in out.chunks_exact_mut(d.max(1)).zip(order) {
+                dst.copy_from_slice(&t[i * d..(i + 1) * d]);
+            }
+            out
+        }
+    }
+}
+
+/// The rows of a view, copied row-major: tiles of 8 rows (one cache line
+/// of each column when the columns are contiguous; the tile stays in L1),
+/// in parallel over blocks of tiles.
+pub(crate) fn rows_of(m: MatRef<'_, f64>) -> Vec<f64> {
+    let (n, d) = (m.nrows(), m.ncols());
+    let mut out = vec![0.0; n * d];
+    if d == 0 {
+        return out;
+    }
+    let cols: Vec<Option<&[f64]>> = (0..d)
+        .map(|j| m.col(j).try_as_col_major().map(|c| c.as_slice()))
+        .collect();
+    out.par_chunks_mut(512 * d)
+        .enumerate()
+        .for_each(|(b, block)| {
+            for (t, tile) in block.chunks_mut(8 * d).enumerate() {
+                let i0 = b * 512 + t * 8;
+                let rows = tile.len() / d;
+                for (j, col) in cols.iter().enumerate() {
+                    match col {
+                        Some(c) => {
+                            for (i, v) in c[i0..i0 + rows].iter().enumerate() {
+                                tile[i * d + j] = *v;
+                            }
+                        }
+                        None => {
+                            for i in 0..rows {
+                                tile[i * d + j] = m[(i0 + i, j)];
+                            }
+                        }
+                    }
+                }
+            }
+        });
+    out
+}
+
+#[inline(always)]
+/// [`dist2`] when it is at most `bound`, else `None` (possibly decided
+/// early: partial sums only grow, and are rounded no higher than the full
+/// sum, so a partial sum above the bound proves the full one is).
+pub(crate) fn dist2_below(a: &[f64], b: &[f64], bound: f64) -> Option<f64> {
+    let n = a.len().min(b.len());
+    let mut lanes = [0.0f64; 8];
+    let total = |l: &[f64; 8]| ((l[0] + l[4]) + (l[1] + l[5])) + ((l[2] + l[6]) + (l[3] + l[7]));
+    let mut i = 0;
+    // 32 coordinates per step (lane j takes j, j + 8, ...: the order of
+    // eight-wide chunks), then a check against the bound.
+    while i + 32 <= n {
+        let (x, y) = (&a[i..i + 32], &b[i..i + 32]);
+        for c in 0..4 {
+            for j in 0..8 {
+                let t = x[c * 8 + j] - y[c * 8 + j];
+                lanes[j] += t * t;
+            }
+        }
+        if total(&lanes) > bound {
+            return None;
+        }
+        i += 32;
+    }
+    while i + 8 <= n {
+        let (x, y) = (&a[i..i + 8], &b[i..i + 8]);
+        for j in 0..8 {
+            let t = x[j] - y[j];
+            lanes[j] += t * t;
+        }
+        i += 8;
+    }
+    for j in 0..n - i {
+        let t = a[i + j] - b[i + j];
+        lanes[j] += t * t;
+    }
+    let d = total(&lanes);
+    (d <= bound).then_some(d)
+}

@@ -1,0 +1,127 @@
+//! Unit tests of the internal strategies and bounds.
+
+use nalgebra::DMatrix;
+
+use crate::brute::{brute_search, power_of_two_scale};
+use crate::prefix::{prefix_search, prefix_search_with};
+use crate::rows::{dist2, row_major};
+use crate::tree::tree_search;
+use crate::{NnParams, NnStrategy, nearest_rows, view};
+
+/// Both ways of scoring the prefix search's candidates (per candidate,
+/// and one GEMM over the block's union) return the brute-force answer,
+/// with and without guesses, on points near a curved 2-manifold in
+/// R^70 (as spectral embeddings are) whose spread decays with the
+/// coordinate.
+#[test]
+fn prefix_search_paths_equal_brute_force() {
+    let (n, d) = (1500, 70);
+    let x = DMatrix::from_fn(n, d, |i, j| {
+        let (u, v) = ((i % 50) as f64 / 50.0, (i / 50) as f64 / 30.0);
+        let f = 1.0 + j as f64;
+        (f * u * 3.1 + (j as f64) * 0.7).sin() * (f * v * 2.3).cos() / f.sqrt()
+    });
+    let q = DMatrix::from_fn(700, d, |i, j| {
+        let r = (i * 7 + 3) % n;
+        x[(r, j)] + 0.03 * ((i * 13 + j * 5) as f64).sin() / (1.0 + j as f64).sqrt()
+    });
+    let brute = brute_search(&x, &q);
+    let guess: Vec<usize> = brute.iter().map(|&t| (t + 1) % n).collect();
+    for density in [0, 1 << 20] {
+        assert_eq!(
+            prefix_search_with(&x, &q, None, density),
+            brute,
+            "{density}"
+        );
+        assert_eq!(
+            prefix_search_with(&x, &q, Some(&guess), density),
+            brute,
+            "{density}"
+        );
+    }
+}
+
+/// Naive f64 search with the strategies' own f64 distance (the same
+/// summation order, so that near-ties break alike; ties: the smallest
+/// index).
+fn naive(x: &DMatrix<f64>, q: &DMatrix<f64>) -> Vec<usize> {
+    let (xr, qr, d) = (row_major(x, None), row_major(q, None), x.ncols());
+    (0..q.nrows())
+        .map(|i| {
+            let mut best = (f64::INFINITY, 0);
+            for r in 0..x.nrows() {
+                let dist = dist2(&xr[r * d..(r + 1) * d], &qr[i * d..(i + 1) * d]);
+                if dist < best.0 {
+                    best = (dist, r);
+                }
+            }
+            best.1
+        })
+        .collect()
+}
+
+/// The f32 strategies are exact on their own, without the power-of-two
+/// scaling of [`search`], where the cross terms underflow (coordinates
+/// ~1e-29, products ~1e-57: all flush to zero, so only the band's
+/// absolute terms keep the nearest row) or where tiny coordinates sit
+/// next to ordinary ones. A band without [`score_err`]'s absolute
+/// terms returns wrong rows in the first case.
+#[test]
+fn f32_bands_cover_underflow() {
+    let (nx, d) = (300, 40);
+    for (offset, spread) in [(0.0, 1e-30), (0.0, 1e-42), (1.0, 1e-40)] {
+        let x = DMatrix::from_fn(nx, d, |i, j| {
+            offset + spread * (((i * 37 + j * 11) % 101) as f64 - 50.0)
+        });
+        let q = DMatrix::from_fn(120, d, |i, j| {
+            offset + spread * (((i * 53 + j * 7) % 97) as f64 - 48.5)
+        });
+        let want = naive(&x, &q);
+        assert_eq!(brute_search(&x, &q), want, "brute {offset} {spread}");
+        assert_eq!(tree_search(&x, &q), want, "tree {offset} {spread}");
+        assert_eq!(
+            prefix_search(&x, &q, None),
+            want,
+            "prefix {offset} {spread}"
+        );
+    }
+}
+
+/// Far outside f32's range (coordinates 1e±30 and 1e±150: underflow
+/// and overflow of the f32 products and inputs) every strategy agrees with the naive
+/// search, through the power-of-two scaling.
+#[test]
+fn every_strategy_exact_at_extreme_scales() {
+    let (nx, d) = (500, 24);
+    for scale in [1e-30, 1e30, 1e-150, 1e150] {
+        let x = DMatrix::from_fn(nx, d, |i, j| {
+            scale * ((i * 37 + j * 11) % 101) as f64 / 101.0
+        });
+        let q = DMatrix::from_fn(300, d, |i, j| scale * ((i * 53 + j * 7) % 97) as f64 / 97.0);
+        let want = naive(&x, &q);
+        for strategy in [
+            NnStrategy::Auto,
+            NnStrategy::Brute,
+            NnStrategy::Tree,
+            NnStrategy::Prefix,
+            NnStrategy::Tiles,
+        ] {
+            assert_eq!(
+                nearest_rows(view(&x), view(&q), None, &NnParams::with_strategy(strategy)).unwrap(),
+                want,
+                "{strategy:?} at {scale:e}"
+            );
+        }
+    }
+    let zero = DMatrix::zeros(1, 2);
+    assert_eq!(
+        power_of_two_scale(&DMatrix::from_element(2, 2, 3.0), &zero),
+        None
+    );
+    for v in [3e-300, 7e300, f64::MAX] {
+        let s = power_of_two_scale(&DMatrix::from_element(2, 2, v), &zero).unwrap();
+        assert!((1.0..2.0).contains(&(v * s)), "{v:e}: {}", v * s);
+    }
+    let s = power_of_two_scale(&DMatrix::from_element(2, 2, 5e-320), &zero).unwrap();
+    assert!((1e-20..1e-15).contains(&(5e-320 * s)), "{}", 5e-320 * s);
+}

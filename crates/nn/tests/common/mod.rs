@@ -1,0 +1,92 @@
+//! Shared test data: a torus with per-vertex pseudo-random scaling (no
+//! symmetry left) and its eigenbasis (spectral embeddings, the rows this
+//! crate is tuned for); a naive nearest-row search; short forms of
+//! [`fmaps_nn::nearest_rows`] on nalgebra matrices.
+
+// Each test binary uses some of these helpers.
+#![allow(dead_code)]
+
+use fmaps_eigensolve::{EigenProblem, EigenSolver, NativeSolver, SpectralBasis};
+use fmaps_laplacian::{LaplacianParams, cotan_laplacian};
+use fmaps_mesh_io::TriMesh;
+use fmaps_mesh_io::generate::torus;
+use fmaps_nn::{NnParams, NnStrategy, view};
+use nalgebra::DMatrix;
+
+/// The bumpy torus with `nu x nv` vertices.
+pub fn bumpy(nu: usize, nv: usize) -> TriMesh {
+    let (mut v, f) = torus(2.0, 0.8, nu, nv).into_parts();
+    for (k, p) in v.iter_mut().enumerate() {
+        let s = 1.0 + 0.08 * ((k * 31 % 17) as f64 / 17.0 - 0.5);
+        *p = [p[0] * s, p[1] * s * 1.1, p[2] * (2.0 - s)];
+    }
+    TriMesh::new(v, f).unwrap()
+}
+
+/// The first k eigenpairs (native solver, lumped mass).
+pub fn basis(mesh: &TriMesh, k: usize) -> SpectralBasis {
+    let op = cotan_laplacian(mesh, &LaplacianParams::default());
+    NativeSolver::default()
+        .solve(
+            &EigenProblem::new(op.stiffness.view(), &op.mass).unwrap(),
+            k,
+        )
+        .unwrap()
+}
+
+/// The nearest row of each query by direct f64 distances (ties: the
+/// smaller index).
+pub fn naive_nearest(x: &DMatrix<f64>, q: &DMatrix<f64>) -> Vec<usize> {
+    (0..q.nrows())
+        .map(|i| {
+            let dist = |k: usize| (x.row(k) - q.row(i)).norm_squared();
+            (0..x.nrows())
+                .min_by(|&a, &b| dist(a).total_cmp(&dist(b)).then(a.cmp(&b)))
+                .unwrap()
+        })
+        .collect()
+}
+
+/// [`fmaps_nn::nearest_rows`] with the default strategy.
+pub fn nearest_rows(x: &DMatrix<f64>, q: &DMatrix<f64>) -> Vec<usize> {
+    nearest_rows_with(x, q, NnStrategy::Auto)
+}
+
+/// [`fmaps_nn::nearest_rows`] with `strategy`.
+pub fn nearest_rows_with(x: &DMatrix<f64>, q: &DMatrix<f64>, strategy: NnStrategy) -> Vec<usize> {
+    fmaps_nn::nearest_rows(view(x), view(q), None, &NnParams::with_strategy(strategy)).unwrap()
+}
+
+/// [`fmaps_nn::nearest_rows`] with guesses.
+pub fn nearest_rows_hinted(x: &DMatrix<f64>, q: &DMatrix<f64>, hint: &[usize]) -> Vec<usize> {
+    nearest_rows_hinted_with(x, q, hint, NnStrategy::Auto)
+}
+
+/// [`fmaps_nn::nearest_rows`] with guesses and `strategy`.
+pub fn nearest_rows_hinted_with(
+    x: &DMatrix<f64>,
+    q: &DMatrix<f64>,
+    hint: &[usize],
+    strategy: NnStrategy,
+) -> Vec<usize> {
+    fmaps_nn::nearest_rows(
+        view(x),
+        view(q),
+        Some(hint),
+        &NnParams::with_strategy(strategy),
+    )
+    .unwrap()
+}
+
+/// Says, past the test harness's output capture (so that it shows in a
+/// passing run), that a test checks the fallback of the matrix tiles
+/// because this CPU (or `FMAPS_NO_AMX`) has none.
+pub fn note_if_no_tiles(test: &str) {
+    use std::io::Write;
+    if !fmaps_nn::tiles_available() {
+        let _ = writeln!(
+            std::io::stderr(),
+            "note: {test}: no AMX tiles here (or FMAPS_NO_AMX is set); NnStrategy::Tiles is checked through its fallback, the tile kernel is skipped"
+        );
+    }
+}

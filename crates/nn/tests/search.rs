@@ -1,0 +1,234 @@
+//! The exact search against naive f64 searches: random data with
+//! duplicates and near ties, spectral embeddings of a surface (the case the
+//! strategies are tuned for), guesses right and wrong, gaps below f32's
+//! resolution, and the worst case of the bf16 bound of the tiles.
+
+use fmaps_nn::{NnStrategy, PREFIX_DIM, PREFIX_MIN};
+use nalgebra::DMatrix;
+
+mod common;
+use common::{
+    basis, naive_nearest, nearest_rows, nearest_rows_hinted, nearest_rows_hinted_with,
+    nearest_rows_with,
+};
+
+#[test]
+fn nearest_rows_matches_a_naive_search() {
+    // Deterministic pseudo-random data with exact duplicates and near ties.
+    let mut s = 12345u64;
+    let mut rnd = || {
+        s = s
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        ((s >> 11) as f64 / (1u64 << 53) as f64) - 0.5
+    };
+    for d in [1, 3, 17, 33, 64, 150, 257] {
+        let nx = 700;
+        let mut x = DMatrix::from_fn(nx, d, |_, _| rnd());
+        // Row 5 duplicates row 2: a tie resolved to the smaller index.
+        let r2 = x.row(2).into_owned();
+        x.row_mut(5).copy_from(&r2);
+        let mut q = DMatrix::from_fn(300, d, |_, _| rnd());
+        q.row_mut(0).copy_from(&r2);
+        // A query 1e-13 away from row 9: far below the expanded-form rounding
+        // of the other candidates, resolved by the direct re-check.
+        let r9 = x.row(9).map(|v| v + 1e-13);
+        q.row_mut(1).copy_from(&r9);
+        for strategy in [
+            NnStrategy::Auto,
+            NnStrategy::Brute,
+            NnStrategy::Tree,
+            NnStrategy::Prefix,
+            NnStrategy::Tiles,
+        ] {
+            let got = nearest_rows_with(&x, &q, strategy);
+            for (i, &g) in got.iter().enumerate() {
+                let dist = |k: usize| (x.row(k) - q.row(i)).norm_squared();
+                let best = (0..nx)
+                    .min_by(|&a, &b| dist(a).total_cmp(&dist(b)).then(a.cmp(&b)))
+                    .unwrap();
+                assert_eq!(g, best, "{strategy:?} d={d} query {i}");
+            }
+            assert_eq!(got[0], 2);
+            assert_eq!(got[1], 9);
+        }
+    }
+}
+
+/// Spectral embeddings of a surface (the case the tree is for: points on a
+/// 2-manifold in R^k, queries near it) and queries far from the data: the
+/// tree and brute force agree exactly, for every query.
+#[test]
+fn tree_search_equals_brute_force_on_spectral_embeddings() {
+    let b = basis(&common::bumpy(48, 20), 40);
+    let n = b.n();
+    for k in [3, 12, 40] {
+        let x = b.eigenvectors.columns(0, k).into_owned();
+        // Queries: every row moved by a smooth perturbation, plus far points.
+        let mut q = DMatrix::from_fn(n, k, |i, j| {
+            x[(i, j)] + 0.02 * ((i * 7 + j * 3) as f64).sin() * x.column(j).amax()
+        });
+        for i in 0..10 {
+            q.row_mut(i).iter_mut().for_each(|v| *v = 3.0 + i as f64);
+        }
+        let brute = nearest_rows_with(&x, &q, NnStrategy::Brute);
+        let tree = nearest_rows_with(&x, &q, NnStrategy::Tree);
+        assert_eq!(brute, tree, "k = {k}");
+        let tiles = nearest_rows_with(&x, &q, NnStrategy::Tiles);
+        assert_eq!(brute, tiles, "k = {k}, tiles");
+        // The unperturbed embedding maps every vertex to itself.
+        let own = nearest_rows_with(&x, &x, NnStrategy::Tree);
+        assert!(own.iter().enumerate().all(|(i, &j)| i == j), "k = {k}");
+    }
+}
+
+/// The prefix search on spectral embeddings (from its narrowest prefix to
+/// the full one): equal to brute force for every query, with no guess,
+/// with exact guesses, with wrong and out-of-range guesses (on ~1100 rows,
+/// where `nearest_rows_hinted` picks it from d = 64).
+#[test]
+fn prefix_search_equals_brute_force_whatever_the_guesses() {
+    let b = basis(&common::bumpy(48, 24), 80);
+    let n = b.n();
+    // 16: the narrowest prefix (8 coordinates); 30, 41, 48: half of the
+    // coordinates; 80: PREFIX_DIM of them.
+    for k in [2 * PREFIX_MIN, 30, PREFIX_DIM + 1, 48, 80] {
+        let x = b.eigenvectors.columns(0, k).into_owned();
+        // Queries: rows moved by a perturbation that grows with the
+        // frequency (as a noisy functional map does), plus far points.
+        let mut q = DMatrix::from_fn(n, k, |i, j| {
+            x[(i, j)] * (1.0 + 0.3 * (j as f64 / k as f64) * ((i * 13 + j * 7) as f64).sin())
+        });
+        for i in 0..10 {
+            q.row_mut(i).iter_mut().for_each(|v| *v = 3.0 + i as f64);
+        }
+        let brute = nearest_rows_with(&x, &q, NnStrategy::Brute);
+        assert_eq!(
+            nearest_rows_with(&x, &q, NnStrategy::Prefix),
+            brute,
+            "k = {k}"
+        );
+        assert_eq!(nearest_rows(&x, &q), brute, "k = {k}, auto");
+        let shifted: Vec<usize> = brute.iter().map(|&t| (t + 17) % n).collect();
+        let wild: Vec<usize> = (0..n)
+            .map(|i| if i % 3 == 0 { n + i } else { (i * 31) % n })
+            .collect();
+        assert_eq!(
+            nearest_rows_with(&x, &q, NnStrategy::Tiles),
+            brute,
+            "k = {k}, tiles"
+        );
+        for hint in [&brute, &shifted, &wild] {
+            assert_eq!(nearest_rows_hinted(&x, &q, hint), brute, "k = {k}");
+            assert_eq!(
+                nearest_rows_hinted_with(&x, &q, hint, NnStrategy::Tiles),
+                brute,
+                "k = {k}, tiles with guesses"
+            );
+            assert_eq!(
+                nearest_rows_hinted_with(&x, &q, hint, NnStrategy::Prefix),
+                brute,
+                "k = {k}, prefix with guesses"
+            );
+        }
+        // Every row is its own nearest (no two vertices share an embedding).
+        let own = nearest_rows_with(&x, &x, NnStrategy::Prefix);
+        assert!(own.iter().enumerate().all(|(i, &j)| i == j), "k = {k}");
+    }
+}
+
+/// The tile search where bf16 resolves nothing (rows 1e-3 apart on a
+/// common offset of 1e3: the bf16 step there is 4) and where its products
+/// could overflow (1e16, handed to brute force): the exact answer.
+#[test]
+fn tiles_exact_where_bf16_is_coarse_or_out_of_range() {
+    common::note_if_no_tiles("tiles_exact_where_bf16_is_coarse_or_out_of_range");
+    for (offset, spread) in [(1e3, 1e-3), (1.0, 3e-3), (1e16, 1e13), (0.0, 1e-30)] {
+        let (nx, d) = (300, 40);
+        let x = DMatrix::from_fn(nx, d, |i, j| {
+            offset + spread * (((i * 37 + j * 11) % 101) as f64 - 50.0)
+        });
+        let q = DMatrix::from_fn(120, d, |i, j| {
+            offset + spread * (((i * 53 + j * 7) % 97) as f64 - 48.5)
+        });
+        let got = nearest_rows_with(&x, &q, NnStrategy::Tiles);
+        assert_eq!(got, naive_nearest(&x, &q), "offset {offset}");
+    }
+    // Near ties: each query a hair off the midpoint of two random rows in
+    // [0.5, 1.5]^d (bf16 steps of 2⁻⁸..2⁻⁷ there), so that the two
+    // distances differ far below the bf16 rounding of the scores.
+    let mut st = 99u64;
+    let mut rnd = || {
+        st = st
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        (st >> 11) as f64 / (1u64 << 53) as f64
+    };
+    let (nx, d) = (400, 64);
+    let x = DMatrix::from_fn(nx, d, |_, _| 0.5 + rnd());
+    let q = DMatrix::from_fn(400, d, |i, j| {
+        let (a, b) = ((i * 7) % nx, (i * 13 + 1) % nx);
+        0.5 * (x[(a, j)] + x[(b, j)]) + 1e-7 * (rnd() - 0.5)
+    });
+    let got = nearest_rows_with(&x, &q, NnStrategy::Tiles);
+    assert_eq!(got, naive_nearest(&x, &q), "near ties");
+    // The worst case of the bound: every coordinate of the query (1 +
+    // 0.99·2⁻⁸) and of row 5 (1 + 0.98·2⁻⁸) rounds down to 1, so row 5's
+    // score is computed too high by nearly the whole bound; row 9 (1 −
+    // 0.4·2⁻⁸, also 1 in bf16, smaller norm) ranks first and is farther.
+    // A bound 0.9 times as large misses row 5.
+    let h = 2f64.powi(-8);
+    let mut x = DMatrix::from_fn(64, d, |_, _| 2.0 + rnd());
+    x.row_mut(5).fill(1.0 + 0.98 * h);
+    x.row_mut(9).fill(1.0 - 0.4 * h);
+    let q = DMatrix::from_element(3, d, 1.0 + 0.99 * h);
+    assert_eq!(nearest_rows_with(&x, &q, NnStrategy::Tiles), vec![5; 3]);
+    assert_eq!(
+        nearest_rows_hinted_with(&x, &q, &[9, 9, 0], NnStrategy::Tiles),
+        vec![5; 3]
+    );
+}
+
+/// Rows closer than f32 can resolve: the f32 GEMM only selects candidates,
+/// the f64 re-check must still return the true nearest row.
+#[test]
+fn nearest_rows_resolves_below_f32_precision() {
+    let d = 30;
+    let base: Vec<f64> = (0..d).map(|j| 1.0 + 0.37 * j as f64).collect();
+    // 50 rows equal to `base` up to 1e-9 offsets (f32 rounds them alike).
+    let x = DMatrix::from_fn(50, d, |i, j| {
+        base[j] + if j == 3 { 1e-9 * i as f64 } else { 0.0 }
+    });
+    for target in [0usize, 17, 49] {
+        let q = DMatrix::from_fn(1, d, |_, j| {
+            base[j]
+                + if j == 3 {
+                    1e-9 * target as f64 + 2e-10
+                } else {
+                    0.0
+                }
+        });
+        assert_eq!(nearest_rows(&x, &q), vec![target]);
+        assert_eq!(nearest_rows_with(&x, &q, NnStrategy::Tree), vec![target]);
+    }
+    // The same in a dimension where the prefix search applies: the near
+    // ties differ only beyond the prefix.
+    let d = PREFIX_DIM + 8;
+    let base: Vec<f64> = (0..d).map(|j| 1.0 + 0.37 * j as f64).collect();
+    let off = PREFIX_DIM + 3;
+    let x = DMatrix::from_fn(50, d, |i, j| {
+        base[j] + if j == off { 1e-9 * i as f64 } else { 0.0 }
+    });
+    for target in [0usize, 17, 49] {
+        let q = DMatrix::from_fn(1, d, |_, j| {
+            base[j]
+                + if j == off {
+                    1e-9 * target as f64 + 2e-10
+                } else {
+                    0.0
+                }
+        });
+        assert_eq!(nearest_rows_with(&x, &q, NnStrategy::Prefix), vec![target]);
+        assert_eq!(nearest_rows_hinted(&x, &q, &[3]), vec![target]);
+    }
+}
