@@ -62,7 +62,7 @@ pub fn bench(args: &Args) -> anyhow::Result<()> {
     let mut build = Command::new(std::env::var("CARGO").unwrap_or_else(|_| "cargo".into()));
     build
         .current_dir(&root)
-        .args(["build", "--release", "-p", "fmaps"]);
+        .args(["build", "--release", "-p", "fmaps-cli"]);
     if arpack {
         build.args(["--features", "arpack"]);
     }

@@ -22,6 +22,7 @@ mod fit_check;
 mod geodesic_check;
 mod pictures;
 mod publish_check;
+mod test;
 mod util;
 
 use clap::{Parser, Subcommand};
@@ -53,6 +54,8 @@ enum Command {
     Figures(figures::Args),
     /// Pictures of one test pair per collection (transfer, errors, C, embedding, curves), into docs/pictures/.
     Pictures(pictures::Args),
+    /// Every test: `cargo test --workspace` (tidy tests included), then the nearest-neighbour tests without AMX tiles.
+    Test(test::Args),
     /// crates.io readiness of every crate: metadata, licences, docs, `cargo publish --dry-run` in dependency order.
     PublishCheck(publish_check::Args),
 }
@@ -67,6 +70,7 @@ fn main() -> anyhow::Result<()> {
         Command::Figures(a) => figures::figures(&a),
         Command::Pictures(a) => pictures::pictures(&a),
         Command::PublishCheck(a) => publish_check::publish_check(&a),
+        Command::Test(a) => test::test(&a),
         Command::BenchMatch(a) => bench_match::bench_match(&a),
         Command::BenchRefine(a) => bench_refine::bench_refine(&a),
     }

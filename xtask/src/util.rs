@@ -82,12 +82,20 @@ pub fn collections_or_default(asked: &[String]) -> Vec<String> {
 /// no-op when up to date).
 pub fn fmaps_binary() -> anyhow::Result<PathBuf> {
     let status = Command::new(env!("CARGO"))
-        .args(["build", "--release", "-q", "-p", "fmaps", "--bin", "fmaps"])
+        .args([
+            "build",
+            "--release",
+            "-q",
+            "-p",
+            "fmaps-cli",
+            "--bin",
+            "fmaps",
+        ])
         .current_dir(root())
         .status()
         .context("building the fmaps binary")?;
     if !status.success() {
-        bail!("cargo build -p fmaps failed");
+        bail!("cargo build -p fmaps-cli failed");
     }
     let exe = std::env::current_exe()?;
     let bin = exe

@@ -122,7 +122,8 @@ pub struct SpectrumParams {
 }
 
 /// Seconds spent in each stage of [`spectrum`].
-#[derive(Debug, Clone, Copy, Default, serde::Serialize)]
+#[derive(Debug, Clone, Copy, Default)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize))]
 pub struct StageTimes {
     /// Cotangent Laplacian assembly.
     pub laplacian: f64,

@@ -301,7 +301,8 @@ pub fn prepare(mesh: &TriMesh, params: &MatchParams) -> Result<PreparedShape, Ma
 }
 
 /// Seconds per stage of [`match_prepared`].
-#[derive(Debug, Clone, Copy, Default, serde::Serialize)]
+#[derive(Debug, Clone, Copy, Default)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize))]
 pub struct MatchTimes {
     /// Laplacians and eigenbases of both shapes (0 when prepared earlier).
     pub spectra: f64,
@@ -349,7 +350,8 @@ pub struct MatchResult {
 }
 
 /// One start of a multi-start run.
-#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize))]
 pub struct Start {
     /// Size of the initial map.
     pub k: usize,

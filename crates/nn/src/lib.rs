@@ -313,9 +313,6 @@ fn search(
 
 /// Smallest dimension [`NnStrategy::Auto`] uses the matrix tiles from
 /// (where they are available). Below, the tiles pad every row to 32
-/// coordinates and the tree is about as fast (measured on FAUST
-/// embeddings, one thread, `cargo xtask bench-refine --nn-only` and the
-/// `nn_profile` example: tiles 0.0103 s against the tree's 0.0130 at
-/// d = 10, within ±30% either way at d = 4-8; at d = 30, 0.0099 against
-/// 0.0364).
+/// coordinates and the tree is about as fast (README, "Choosing a
+/// strategy").
 const TILES_FROM: usize = 16;

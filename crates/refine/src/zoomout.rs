@@ -29,7 +29,7 @@ pub struct Subsample {
 /// output point map is the conversion of the final C.
 ///
 /// The default schedule 50 → 150 step 5 is the one pyFM users run (and
-/// `../shared/peers/pyfm_pipeline.py`); the ZoomOut paper's is k → 200 in
+/// the peers' pyFM pipeline script); the ZoomOut paper's is k → 200 in
 /// steps of 1 (`--zoomout 30:200:1` on the command line).
 #[derive(Debug, Clone, PartialEq)]
 pub struct ZoomOut {

@@ -1,5 +1,7 @@
 //! The normal equations of the energy with operator terms, solved by
 //! conjugate gradients in f64 preconditioned by a Cholesky factor in f32.
+//! (tidy: long file: assembly, structured products and the solver share
+//! one private state, and the tests check them against each other.)
 //!
 //! The normal equations `H vec(C) = b` (H is half the Hessian of the
 //! energy, size k_A·k_B less the fixed column) are symmetric positive

@@ -2,17 +2,8 @@
 //! absent): the mesh loads clean and the spectrum meets the basis contract;
 //! with the `arpack` feature, both backends agree to 1e-10.
 
-use std::path::PathBuf;
-
-fn data_dir() -> Option<PathBuf> {
-    let dir = std::env::var_os("FMAPS_DATA")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| {
-            PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared/datasets")
-        });
-    dir.join("bcicp/FAUST/vtx_5k/tr_reg_000.off")
-        .exists()
-        .then_some(dir)
+fn data_dir() -> Option<std::path::PathBuf> {
+    fmaps_tests::data_dir("bcicp/FAUST/vtx_5k/tr_reg_000.off")
 }
 
 #[test]

@@ -1,0 +1,334 @@
+//! `fmaps match`: two meshes to a point map (and C).
+
+use super::*;
+
+/// Options of `fmaps match`.
+#[derive(clap::Args)]
+pub(crate) struct MatchArgs {
+    /// Source mesh A (.off, .obj, .ply).
+    source: PathBuf,
+    /// Target mesh B.
+    target: PathBuf,
+    /// Output map T: A -> B, one 1-based B vertex per A vertex (the
+    /// dataset's .map format).
+    #[arg(long)]
+    out: Option<PathBuf>,
+    /// Size of the functional map (k x k).
+    #[arg(long, short = 'k', default_value_t = 50)]
+    k: usize,
+    /// Eigenpairs computed per shape.
+    #[arg(long, default_value_t = 200)]
+    k_process: usize,
+    /// Descriptor family.
+    #[arg(long, default_value = "wks")]
+    descriptor: fmaps::pipeline::DescriptorKind,
+    /// Descriptor samples (WKS energies or HKS times).
+    #[arg(long, default_value_t = 100)]
+    n_descr: usize,
+    /// Landmark file: one pair `a b` of 1-based vertex indices (source,
+    /// target) per line, or one index used on both shapes.
+    #[arg(long)]
+    landmarks: Option<PathBuf>,
+    /// Relative weight of the orientation-preserving term (0 = off).
+    #[arg(long, default_value_t = 1.0)]
+    w_orient: f64,
+    /// Refinement of the initial map (`--zoomout` alone implies zoomout).
+    #[arg(long, value_enum)]
+    refine: Option<RefineKind>,
+    /// ZoomOut schedule START:FINAL:STEP (the basis grows from START to
+    /// FINAL by STEP; FINAL eigenpairs are computed if k-process is lower).
+    #[arg(long, value_name = "START:FINAL:STEP")]
+    zoomout: Option<String>,
+    /// ICP iterations (stops earlier at a fixed point).
+    #[arg(long, default_value_t = 10)]
+    icp_iterations: usize,
+    /// Run the ZoomOut iterations on this many farthest points per shape
+    /// (the paper's fast variant); the final map covers all vertices.
+    #[arg(long)]
+    refine_samples: Option<usize>,
+    /// Bijective ZoomOut: refine both directions together.
+    #[arg(long)]
+    bijective: bool,
+    /// Convert maps with the adjoint of C (initial map and refinement).
+    #[arg(long)]
+    adjoint: bool,
+    /// Multi-start: also run from initial maps of these sizes and keep
+    /// the final map whose orientation is best preserved; `none` for a
+    /// single start. Default: `20,30` with --refine zoomout (measured:
+    /// fewer left/right swaps, see README), none otherwise.
+    #[arg(long, value_name = "K1,K2,..|none")]
+    starts: Option<String>,
+    /// With several starts: try the further starts only when the first
+    /// map's orientation score is below this (well-oriented pairs cost one
+    /// run).
+    #[arg(long, value_name = "SCORE")]
+    restart_below: Option<f64>,
+    /// Write C_BA (k x k, functions on B to functions on A) as text.
+    #[arg(long)]
+    save_fmap: Option<PathBuf>,
+    /// Print one JSON object (stage times, map metrics, energy).
+    #[arg(long)]
+    json: bool,
+}
+
+#[derive(Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub(crate) enum RefineKind {
+    /// No refinement.
+    None,
+    /// Spectral ICP (orthogonal Procrustes) at the map's size.
+    Icp,
+    /// ZoomOut spectral upsampling.
+    Zoomout,
+}
+
+pub(crate) fn read_landmarks(path: &Path) -> Result<Vec<(usize, usize)>, Failure> {
+    let text = std::fs::read_to_string(path)
+        .map_err(|e| input(anyhow::anyhow!("{}: {e}", path.display())))?;
+    let mut out = Vec::new();
+    for (line_no, line) in text.lines().enumerate() {
+        let fields: Vec<&str> = line.split_whitespace().collect();
+        if fields.is_empty() {
+            continue;
+        }
+        let parse = |f: &str| -> Result<usize, Failure> {
+            match f.parse::<usize>() {
+                Ok(v) if v >= 1 => Ok(v - 1),
+                _ => Err(input(anyhow::anyhow!(
+                    "{}:{}: '{f}' is not a 1-based vertex index",
+                    path.display(),
+                    line_no + 1
+                ))),
+            }
+        };
+        match fields.as_slice() {
+            [a] => {
+                let a = parse(a)?;
+                out.push((a, a));
+            }
+            [a, b] => out.push((parse(a)?, parse(b)?)),
+            _ => {
+                return Err(input(anyhow::anyhow!(
+                    "{}:{}: expected one or two vertex indices, found {}",
+                    path.display(),
+                    line_no + 1,
+                    fields.len()
+                )));
+            }
+        }
+    }
+    Ok(out)
+}
+
+/// The refinement asked for on the command line.
+pub(crate) fn refinement(args: &MatchArgs) -> Result<fmaps::pipeline::Refinement, Failure> {
+    use fmaps::pipeline::Refinement;
+    let kind = match (args.refine, &args.zoomout) {
+        (Some(k), _) => k,
+        (None, Some(_)) => RefineKind::Zoomout,
+        (None, None) => RefineKind::None,
+    };
+    let bad = |m: String| Err(input(anyhow::anyhow!(m)));
+    Ok(match kind {
+        RefineKind::None => Refinement::None,
+        RefineKind::Icp => Refinement::Icp(fmaps::refine::Icp {
+            max_iterations: args.icp_iterations,
+            adjoint: args.adjoint,
+        }),
+        RefineKind::Zoomout => {
+            let (k_start, k_final, step) = match &args.zoomout {
+                None => (50, 150, 5),
+                Some(text) => {
+                    let parts: Vec<Option<usize>> =
+                        text.split(':').map(|p| p.trim().parse().ok()).collect();
+                    match parts.as_slice() {
+                        [Some(a), Some(b), Some(c)] if *a > 0 && a <= b && *c > 0 => (*a, *b, *c),
+                        _ => {
+                            return bad(format!(
+                                "--zoomout '{text}': expected START:FINAL:STEP with 0 < START <= FINAL and STEP >= 1, e.g. 30:200:1"
+                            ));
+                        }
+                    }
+                }
+            };
+            if k_start > args.k {
+                return bad(format!(
+                    "--zoomout starts at {k_start}, but the initial map is only {k} x {k} (--k {k})",
+                    k = args.k
+                ));
+            }
+            Refinement::ZoomOut {
+                zoomout: fmaps::refine::ZoomOut {
+                    k_start,
+                    k_final,
+                    step,
+                    adjoint: args.adjoint,
+                    bijective: args.bijective,
+                    subsample: None,
+                },
+                samples: args.refine_samples,
+            }
+        }
+    })
+}
+
+pub(crate) fn match_cmd(args: &MatchArgs) -> Result<(), Failure> {
+    use fmaps::pipeline::{MatchError, MatchParams, match_shapes_with_progress};
+    let t = Instant::now();
+    let a = load(&args.source)?;
+    let b = load(&args.target)?;
+    let load_seconds = t.elapsed().as_secs_f64();
+    let mut params = MatchParams {
+        k: args.k,
+        k_process: args.k_process,
+        k_descr: 128.min(args.k_process),
+        descriptor: args.descriptor,
+        n_descr: args.n_descr,
+        w_orient: args.w_orient,
+        ..MatchParams::default()
+    };
+    if let Some(p) = &args.landmarks {
+        params.landmarks = read_landmarks(p)?;
+    }
+    params.adjoint = args.adjoint;
+    params.refine = refinement(args)?;
+    params.starts = match args.starts.as_deref().map(str::trim) {
+        Some("none") => Vec::new(),
+        Some(list) => match list.split(',').map(|s| s.trim().parse::<usize>()).collect() {
+            Ok(v) => v,
+            Err(_) => {
+                return Err(input(anyhow::anyhow!(
+                    "--starts '{list}': expected sizes K1,K2,.. (e.g. 20,30) or none"
+                )));
+            }
+        },
+        // The default further starts, those the computed basis allows.
+        None if matches!(params.refine, fmaps::pipeline::Refinement::ZoomOut { .. }) => {
+            let k_process = params.k_process.max(params.refine.k_needed());
+            fmaps::pipeline::ZOOMOUT_STARTS
+                .into_iter()
+                .filter(|&s| s <= k_process)
+                .collect()
+        }
+        None => Vec::new(),
+    };
+    if args.restart_below.is_some() && params.starts.is_empty() {
+        return Err(input(anyhow::anyhow!(
+            "--restart-below needs further starts (--starts K1,K2, or --refine zoomout)"
+        )));
+    }
+    params.restart_below = args.restart_below;
+    params.k_process = params.k_process.max(params.refine.k_needed());
+    let spinner = Spinner::new("matching");
+    let r = match_shapes_with_progress(&a, &b, &params, &|s| spinner.stage(s)).map_err(
+        |e| match e {
+            MatchError::InvalidParameter(_) => input(e),
+            e => runtime(e),
+        },
+    )?;
+    drop(spinner);
+    if let Some(out) = &args.out {
+        mesh_io::write_map(out, &r.t_ab).map_err(runtime)?;
+    }
+    if let Some(path) = &args.save_fmap {
+        let mut text = String::new();
+        for row in r.c_ba.row_iter() {
+            let cells: Vec<String> = row.iter().map(|v| format!("{v:.17e}")).collect();
+            outln!(text, "{}", cells.join(" "));
+        }
+        std::fs::write(path, text)
+            .map_err(|e| runtime(anyhow::anyhow!("{}: {e}", path.display())))?;
+    }
+    let total = t.elapsed().as_secs_f64();
+    if args.json {
+        let v = json!({
+            "source": args.source.display().to_string(),
+            "target": args.target.display().to_string(),
+            "n_source": a.n_vertices(), "n_target": b.n_vertices(), "k": args.k,
+            "out": args.out.as_ref().map(|p| p.display().to_string()),
+            "seconds": {"load": load_seconds, "spectra": r.times.spectra,
+                "descriptors": r.times.descriptors, "operators": r.times.operators,
+                "solve": r.times.solve, "point_map": r.times.point_map,
+                "refine": r.times.refine, "total": total},
+            "refine": r.refine.as_ref().map(|rep| json!({
+                "method": rep.method, "iterations": rep.iterations.len(),
+                "converged": rep.converged, "nn_searches": rep.nn_searches,
+                "nn_seconds": rep.nn_seconds, "seconds": rep.seconds,
+                "final_k": r.c_ba.ncols(),
+                "changed_per_iteration": rep.iterations.iter().map(|i| i.changed).collect::<Vec<_>>(),
+            })),
+            "orientation": r.orientation,
+            "starts": r.starts,
+            "changed_by_refinement": r.t_ab.iter().zip(&r.t_ab_init).filter(|(x, y)| x != y).count(),
+            "energy": r.energy,
+            "energy_terms": {"descr": r.energy_terms[0], "lap": r.energy_terms[1],
+                "dcomm": r.energy_terms[2], "orient": r.energy_terms[3]},
+            "orthonormality": r.metrics.orthonormality,
+            "laplacian_commutativity": r.metrics.laplacian_commutativity,
+            "sparsity": r.metrics.sparsity,
+        });
+        return emit(&format!("{v}\n"));
+    }
+    let mut o = String::new();
+    outln!(
+        o,
+        "{} ({} vertices) -> {} ({} vertices), k = {}",
+        args.source.display(),
+        a.n_vertices(),
+        args.target.display(),
+        b.n_vertices(),
+        args.k
+    );
+    let st = &r.times;
+    for (name, sec) in [
+        ("load", load_seconds),
+        ("eigenbases (both)", st.spectra),
+        ("descriptors", st.descriptors),
+        ("operators", st.operators),
+        ("solve", st.solve),
+        ("point map", st.point_map),
+        ("refinement", st.refine),
+        ("total", total),
+    ] {
+        outln!(o, "  {name:<18} {sec:>8.3} s");
+    }
+    outln!(
+        o,
+        "C_BA: ||C^T C - I|| = {:.3}, Laplacian commutativity {:.3}, {:.1}% of entries below 0.1",
+        r.metrics.orthonormality,
+        r.metrics.laplacian_commutativity,
+        100.0 * r.metrics.sparsity
+    );
+    if let Some(rep) = &r.refine {
+        let changed = r
+            .t_ab
+            .iter()
+            .zip(&r.t_ab_init)
+            .filter(|(x, y)| x != y)
+            .count();
+        outln!(
+            o,
+            "refinement: {rep}; {changed} of {} vertices moved",
+            r.t_ab.len()
+        );
+    }
+    outln!(
+        o,
+        "orientation score of the map: {:.3} (1: preserved, -1: mirrored)",
+        r.orientation
+    );
+    for s in &r.starts {
+        outln!(
+            o,
+            "  start k = {:<4} orientation {:.3} ({:.2} s){}",
+            s.k,
+            s.orientation,
+            s.seconds,
+            if s.chosen { "  <- kept" } else { "" }
+        );
+    }
+    match &args.out {
+        Some(p) => outln!(o, "wrote {}", p.display()),
+        None => outln!(o, "(no --out: map not written)"),
+    }
+    emit(&o)
+}

@@ -1,0 +1,163 @@
+//! `fmaps spectrum`: the eigenbasis of a mesh, timed per stage.
+
+use super::*;
+
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn spectrum(
+    path: Option<&Path>,
+    builtin: Option<Builtin>,
+    k: usize,
+    backend: Backend,
+    mass: Mass,
+    block_size: Option<usize>,
+    json: bool,
+    out: Option<&Path>,
+) -> Result<(), Failure> {
+    let t = Instant::now();
+    let (name, mesh) = match (path, builtin) {
+        (Some(p), _) => (p.display().to_string(), load(p)?),
+        (None, Some(Builtin::Sphere)) => (
+            "builtin unit sphere (icosphere, 5 subdivisions)".to_string(),
+            mesh_io::generate::icosphere(1.0, 5),
+        ),
+        (None, Some(Builtin::Torus)) => (
+            "builtin torus R=1, r=0.4".to_string(),
+            mesh_io::generate::torus(1.0, 0.4, 160, 64),
+        ),
+        (None, None) => return Err(input(anyhow::anyhow!("give a mesh file or --builtin"))),
+    };
+    let load_s = t.elapsed().as_secs_f64();
+    let params = SpectrumParams {
+        mass: match mass {
+            Mass::Lumped => MassKind::Lumped,
+            Mass::Voronoi => MassKind::Voronoi,
+        },
+        backend,
+        threads: rayon::current_num_threads(),
+        block_size,
+    };
+    let spinner = Spinner::new(format!("{k} eigenpairs of {} vertices", mesh.n_vertices()));
+    let s = fmaps::spectrum(&mesh, k, &params);
+    drop(spinner);
+    let s = s.map_err(|e| match e {
+        fmaps::eigensolve::Error::InvalidK { .. }
+        | fmaps::eigensolve::Error::NonPositiveMass { .. }
+        | fmaps::eigensolve::Error::InvalidParameter(_) => input(e),
+        _ => runtime(e),
+    })?;
+    let b = &s.basis;
+    if let Some(out) = out {
+        write_basis(out, b)
+            .with_context(|| format!("writing {}", out.display()))
+            .map_err(runtime)?;
+    }
+    let peak = peak_rss_mb();
+    let exact: Option<Vec<f64>> = matches!(builtin, Some(Builtin::Sphere)).then(|| {
+        (0..)
+            .flat_map(|l: usize| std::iter::repeat_n((l * (l + 1)) as f64, 2 * l + 1))
+            .take(k)
+            .collect()
+    });
+    let mut o = String::new();
+    if json {
+        let v = json!({
+            "mesh": name,
+            "n_vertices": mesh.n_vertices(),
+            "n_faces": mesh.n_faces(),
+            "k": k,
+            "backend": b.report.backend,
+            "shift": b.report.shift,
+            "threads": rayon::current_num_threads(),
+            "seconds": { "load": load_s, "laplacian": s.times.laplacian, "factorization": s.times.factorization, "eigensolve": s.times.eigensolve },
+            "restarts": b.report.restarts,
+            "operator_applications": b.report.operator_applications,
+            "max_residual": b.report.max_residual(),
+            "orthonormality_error": b.report.orthonormality_error,
+            "skipped_degenerate_faces": s.skipped_faces.len(),
+            "peak_rss_mb": peak,
+            "eigenvalues": b.eigenvalues.as_slice(),
+            "residuals": b.report.residuals,
+        });
+        return emit(&format!(
+            "{}\n",
+            serde_json::to_string(&v).map_err(runtime)?
+        ));
+    }
+    outln!(
+        o,
+        "{name}: {} vertices, {} faces",
+        mesh.n_vertices(),
+        mesh.n_faces()
+    );
+    if !s.skipped_faces.is_empty() {
+        outln!(
+            o,
+            "warning: {} degenerate faces were left out of the Laplacian",
+            s.skipped_faces.len()
+        );
+    }
+    outln!(
+        o,
+        "{} backend, k = {k}, shift {:.4}: {} restarts, {} operator applications",
+        b.report.backend,
+        b.report.shift,
+        b.report.restarts,
+        b.report.operator_applications
+    );
+    outln!(
+        o,
+        "seconds: load {:.3}  laplacian {:.4}  factorization {:.3}  eigensolve {:.3}  (peak memory {})",
+        load_s,
+        s.times.laplacian,
+        s.times.factorization,
+        s.times.eigensolve,
+        peak.map_or("n/a".into(), |m| format!("{m:.0} MB"))
+    );
+    outln!(
+        o,
+        "max residual ‖Lφ − λMφ‖_M⁻¹ = {:.2e}, max |ΦᵀMΦ − I| = {:.2e}",
+        b.report.max_residual(),
+        b.report.orthonormality_error
+    );
+    match &exact {
+        Some(ex) => {
+            outln!(o, "   i   eigenvalue          exact l(l+1)   rel. error");
+            for (i, (l, e)) in b.eigenvalues.iter().zip(ex).enumerate() {
+                let rel = if *e > 0.0 {
+                    format!("{:.2e}", (l - e).abs() / e)
+                } else {
+                    "-".into()
+                };
+                outln!(o, "{i:4}   {l:<18.10} {e:<14} {rel}");
+            }
+        }
+        None => {
+            outln!(o, "   i   eigenvalue");
+            for (i, l) in b.eigenvalues.iter().enumerate() {
+                outln!(o, "{i:4}   {l:.12}");
+            }
+        }
+    }
+    if let Some(out) = out {
+        outln!(o, "wrote {} (+ _eigenvalues.npy, _mass.npy)", out.display());
+    }
+    emit(&o)
+}
+
+/// FILE.npy: eigenvectors; FILE_eigenvalues.npy; FILE_mass.npy.
+pub(crate) fn write_basis(out: &Path, b: &fmaps::eigensolve::SpectralBasis) -> anyhow::Result<()> {
+    let stem = out.with_extension("");
+    let sibling = |suffix: &str| PathBuf::from(format!("{}_{suffix}.npy", stem.display()));
+    fmaps::npy::save_f64(out, &[b.n(), b.k()], b.eigenvectors.as_slice())?;
+    fmaps::npy::save_f64(&sibling("eigenvalues"), &[b.k()], b.eigenvalues.as_slice())?;
+    fmaps::npy::save_f64(&sibling("mass"), &[b.n()], b.mass.as_slice())?;
+    Ok(())
+}
+
+/// Peak resident memory of this process (Linux), in MB.
+pub(crate) fn peak_rss_mb() -> Option<f64> {
+    let status = std::fs::read_to_string("/proc/self/status").ok()?;
+    let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
+    let kb: f64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kb / 1024.0)
+}

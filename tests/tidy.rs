@@ -1,0 +1,317 @@
+//! Tidy tests: the rules of ARCHITECTURE.md that a machine can check, so
+//! that the document stays true. Each names the files that break a rule.
+
+use std::fs;
+use std::path::{Path, PathBuf};
+
+use fmaps_tests::workspace_root;
+
+/// Every `.rs` file of the workspace (crates, xtask, tests), as paths
+/// relative to the root with `/` separators, sorted.
+fn rust_files() -> Vec<String> {
+    fn walk(dir: &Path, out: &mut Vec<PathBuf>) {
+        let Ok(entries) = fs::read_dir(dir) else {
+            return;
+        };
+        for e in entries.flatten() {
+            let p = e.path();
+            let name = e.file_name();
+            if name == "target" || name.to_string_lossy().starts_with('.') {
+                continue;
+            }
+            if p.is_dir() {
+                walk(&p, out);
+            } else if p.extension().is_some_and(|x| x == "rs") {
+                out.push(p);
+            }
+        }
+    }
+    let root = workspace_root();
+    let mut files = Vec::new();
+    for top in ["crates", "xtask", "tests", "examples"] {
+        walk(&root.join(top), &mut files);
+    }
+    let mut rel: Vec<String> = files
+        .iter()
+        .map(|p| {
+            p.strip_prefix(&root)
+                .unwrap()
+                .to_string_lossy()
+                .replace('\\', "/")
+        })
+        .collect();
+    rel.sort();
+    rel
+}
+
+fn read(rel: &str) -> String {
+    fs::read_to_string(workspace_root().join(rel)).unwrap_or_else(|e| panic!("{rel}: {e}"))
+}
+
+/// The folders under `crates/`.
+fn crate_dirs() -> Vec<String> {
+    let mut dirs: Vec<String> = fs::read_dir(workspace_root().join("crates"))
+        .unwrap()
+        .flatten()
+        .filter(|e| e.path().join("Cargo.toml").exists())
+        .map(|e| e.file_name().to_string_lossy().into_owned())
+        .collect();
+    dirs.sort();
+    dirs
+}
+
+/// A line without its `//` comment and the contents of its string
+/// literals (rough, but enough for keywords).
+fn code_of(line: &str) -> String {
+    let mut out = String::new();
+    let mut in_str = false;
+    let mut prev = ' ';
+    let mut chars = line.chars().peekable();
+    while let Some(c) = chars.next() {
+        if in_str {
+            if c == '"' && prev != '\\' {
+                in_str = false;
+            }
+        } else if c == '"' {
+            in_str = true;
+        } else if c == '/' && chars.peek() == Some(&'/') {
+            break;
+        } else {
+            out.push(c);
+        }
+        prev = if prev == '\\' && c == '\\' { ' ' } else { c };
+    }
+    out
+}
+
+/// Where `unsafe` may appear: the nearest-neighbour crate (AMX tiles,
+/// target-feature kernels, the strided row view), the ARPACK binding, and
+/// xtask's peak-memory measurement of child processes (`wait4`; not
+/// published).
+const UNSAFE_ALLOWED: [&str; 3] = [
+    "crates/nn/",
+    "crates/eigensolve/src/arpack.rs",
+    "xtask/src/util.rs",
+];
+
+/// The lines of `text` that use the `unsafe` keyword (blocks, functions,
+/// impls, traits, extern blocks).
+fn unsafe_lines(text: &str) -> Vec<usize> {
+    let kw = concat!("un", "safe");
+    text.lines()
+        .enumerate()
+        .filter(|(_, l)| {
+            let code = code_of(l);
+            code.match_indices(kw).any(|(i, _)| {
+                let before = code[..i].chars().last();
+                let after = code[i + kw.len()..].trim_start();
+                !before.is_some_and(|c| c.is_alphanumeric() || c == '_')
+                    && ["{", "fn", "impl", "trait", "extern"]
+                        .iter()
+                        .any(|t| after.starts_with(t))
+            })
+        })
+        .map(|(i, _)| i + 1)
+        .collect()
+}
+
+#[test]
+fn unsafe_code_only_where_allowed() {
+    let mut bad = Vec::new();
+    for f in rust_files() {
+        if UNSAFE_ALLOWED.iter().any(|a| f.starts_with(a)) {
+            continue;
+        }
+        for line in unsafe_lines(&read(&f)) {
+            bad.push(format!("{f}:{line}"));
+        }
+    }
+    assert!(
+        bad.is_empty(),
+        "`unsafe` outside fmaps-nn, the ARPACK binding and xtask's wait4 (ARCHITECTURE.md, \"Unsafe code\"): {bad:?}"
+    );
+}
+
+#[test]
+fn the_unsafe_detector_sees_blocks_and_ignores_comments_and_strings() {
+    let kw = concat!("un", "safe");
+    let text = format!(
+        "let a = {kw} {{ f() }};\n// {kw} {{ in a comment }}\nlet s = \"{kw} {{\";\n{kw} impl Send for X {{}}\nlet {kw}_name = 1;\n"
+    );
+    assert_eq!(unsafe_lines(&text), vec![1, 4]);
+}
+
+#[test]
+fn crates_outside_the_allowed_ones_forbid_unsafe_code() {
+    let mut bad = Vec::new();
+    for dir in crate_dirs() {
+        if dir == "nn" {
+            continue;
+        }
+        let attr = if dir == "eigensolve" {
+            "#![deny(unsafe_code)]"
+        } else {
+            "#![forbid(unsafe_code)]"
+        };
+        for root in ["src/lib.rs", "src/main.rs"] {
+            let rel = format!("crates/{dir}/{root}");
+            if workspace_root().join(&rel).exists() && !read(&rel).contains(attr) {
+                bad.push(format!("{rel} lacks {attr}"));
+            }
+        }
+    }
+    assert!(bad.is_empty(), "{bad:?}");
+}
+
+/// `[package] name = "..."` of a manifest.
+fn package_name(manifest: &str) -> Option<String> {
+    let pkg = manifest.split("[package]").nth(1)?;
+    let line = pkg.lines().find(|l| l.trim_start().starts_with("name"))?;
+    Some(line.split('"').nth(1)?.to_string())
+}
+
+#[test]
+fn folder_names_are_package_names() {
+    let mut bad = Vec::new();
+    for dir in crate_dirs() {
+        let name = package_name(&read(&format!("crates/{dir}/Cargo.toml"))).unwrap_or_default();
+        let want = if dir == "fmaps" {
+            "fmaps".to_string()
+        } else {
+            format!("fmaps-{dir}")
+        };
+        if name != want {
+            bad.push(format!(
+                "crates/{dir} publishes as {name:?}, expected {want:?}"
+            ));
+        }
+    }
+    assert!(bad.is_empty(), "{bad:?}");
+}
+
+#[test]
+fn manifests_follow_the_workspace_conventions() {
+    let mut bad = Vec::new();
+    let mut manifests: Vec<String> = crate_dirs()
+        .iter()
+        .map(|d| format!("crates/{d}/Cargo.toml"))
+        .collect();
+    manifests.extend(["xtask/Cargo.toml".into(), "tests/Cargo.toml".into()]);
+    for m in manifests {
+        let text = read(&m);
+        if !text.contains("[lints]\nworkspace = true") {
+            bad.push(format!("{m}: no `[lints] workspace = true`"));
+        }
+        let published = !text.contains("publish = false");
+        if published {
+            let dir = m.trim_end_matches("Cargo.toml");
+            if !text.contains("include = [") {
+                bad.push(format!("{m}: published but sets no `include`"));
+            }
+            if workspace_root().join(dir).join("examples").is_dir()
+                && !text.contains("\"examples/**/*.rs\"")
+            {
+                bad.push(format!("{m}: has examples/ that `include` leaves out"));
+            }
+            for f in ["README.md", "LICENSE-MIT", "LICENSE-APACHE"] {
+                if !workspace_root().join(dir).join(f).exists() {
+                    bad.push(format!("{m}: published without {f}"));
+                }
+            }
+        }
+    }
+    assert!(bad.is_empty(), "{bad:?}");
+}
+
+#[test]
+fn library_code_names_no_path_outside_the_repository() {
+    let mut bad = Vec::new();
+    for f in rust_files() {
+        if !(f.starts_with("crates/") && f.contains("/src/")) {
+            continue;
+        }
+        for (i, line) in read(&f).lines().enumerate() {
+            if ["../shared", "/work/", "/home/", "/root/", "C:\\"]
+                .iter()
+                .any(|p| line.contains(p))
+            {
+                bad.push(format!("{f}:{}", i + 1));
+            }
+        }
+    }
+    assert!(bad.is_empty(), "paths outside the repository: {bad:?}");
+}
+
+/// Lines a source file may have without saying why at its top.
+const LONG_FILE: usize = 800;
+
+#[test]
+fn long_files_say_why_at_their_top() {
+    let mut bad = Vec::new();
+    for f in rust_files() {
+        let text = read(&f);
+        let n = text.lines().count();
+        let says_why = text.lines().take(40).any(|l| l.contains("tidy: long file"));
+        if n > LONG_FILE && !says_why {
+            bad.push(format!("{f} ({n} lines)"));
+        }
+    }
+    assert!(
+        bad.is_empty(),
+        "files over {LONG_FILE} lines without a `tidy: long file` reason in their first 40 lines: {bad:?}"
+    );
+}
+
+#[test]
+fn architecture_md_names_every_crate() {
+    let doc = read("ARCHITECTURE.md");
+    let mut bad = Vec::new();
+    for dir in crate_dirs() {
+        let name = package_name(&read(&format!("crates/{dir}/Cargo.toml"))).unwrap_or_default();
+        // The layout block lists `dir/` under `crates/` with the package.
+        let listed = doc.lines().any(|l| {
+            l.trim_start().starts_with(&format!("{dir}/")) && l.contains(&format!("`{name}`"))
+        });
+        if !listed {
+            bad.push(format!("crates/{dir} ({name})"));
+        }
+    }
+    assert!(bad.is_empty(), "ARCHITECTURE.md does not describe {bad:?}");
+}
+
+#[test]
+fn code_comments_carry_no_benchmark_timings() {
+    // Figures go stale in comments; they belong in README or docs/.
+    let mut bad = Vec::new();
+    for f in rust_files() {
+        if !(f.starts_with("crates/") && f.contains("/src/")) {
+            continue;
+        }
+        for (i, line) in read(&f).lines().enumerate() {
+            let t = line.trim_start();
+            if !(t.starts_with("//")) {
+                continue;
+            }
+            let timing = t
+                .split_whitespace()
+                .collect::<Vec<_>>()
+                .windows(2)
+                .any(|w| {
+                    w[0].trim_matches(|c: char| !c.is_ascii_digit() && c != '.')
+                        .parse::<f64>()
+                        .is_ok()
+                        && [
+                            "s", "ms", "s,", "ms,", "s)", "ms)", "s;", "ms;", "s.", "ms.",
+                        ]
+                        .contains(&w[1])
+                });
+            if timing {
+                bad.push(format!("{f}:{}", i + 1));
+            }
+        }
+    }
+    assert!(
+        bad.is_empty(),
+        "timings in code comments (move them to README or docs/): {bad:?}"
+    );
+}
