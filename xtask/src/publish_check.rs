@@ -100,6 +100,16 @@ fn check_package(p: &serde_json::Value) -> Vec<String> {
         }
     }
     let lib = dir.join("src/lib.rs");
+    let main = dir.join("src/main.rs");
+    if !lib.exists() && main.exists() {
+        // A binary-only package (fmaps-cli): crate docs, no doctest.
+        match std::fs::read_to_string(&main) {
+            Ok(src) if src.starts_with("//!") => {}
+            Ok(_) => bad("src/main.rs has no crate docs (//! at the top)".into()),
+            Err(e) => bad(format!("{}: {e}", main.display())),
+        }
+        return problems;
+    }
     match std::fs::read_to_string(&lib) {
         Ok(src) => {
             if !src.contains("#![deny(missing_docs)]") {
