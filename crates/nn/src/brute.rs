@@ -79,11 +79,12 @@ pub(crate) fn score_err(d: usize, q_norm: f64, x_norm_max: f64) -> f64 {
 
 /// Largest magnitude [`power_of_two_scale`] leaves alone (2³⁰), and its
 /// reciprocal the smallest.
-pub(crate) const F32_COMFORT: f64 = 1_073_741_824.0;
+const F32_COMFORT: f64 = 1_073_741_824.0;
 
 /// A power of two that brings the largest finite coordinate magnitude of
-/// both sets into [1, 2) (at most 2¹⁰⁰⁰: subnormal ones stay below), when it lies outside [2⁻³⁰, 2³⁰] (else `None`:
-/// the common case costs one pass over the data). Exact in f64: the
+/// both sets into [1, 2) (at most 2¹⁰⁰⁰: subnormal ones stay below), when
+/// it lies outside [2⁻³⁰, 2³⁰] (else `None`: the common case costs one
+/// pass over the data). Exact in f64: the
 /// scaled distances are the original ones times the square of the scale,
 /// wherever neither underflows (coordinates more than 2⁵⁰⁰ below the
 /// largest).

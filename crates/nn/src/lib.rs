@@ -23,11 +23,12 @@
 //! (see the `tiles` module), and the few rows within it re-checked in f64.
 //!
 //! The band: with u = 2⁻²⁴, rounding the inputs to f32 and a length-d dot
-//! product in f32 change `q·x` by at most `(d + 2) u |q| |x|`, so each score
-//! `|x|² − 2 q·x` is off by at most `e = (d + 2) u (|q|² + |x|²)`; the
-//! true nearest row scores within `2 e_max` of the f32 minimum. The band
-//! used is twice that.
-
+//! product in f32 change `q·x` by at most `(d + 2) u |q| |x|`, plus the
+//! absolute error of values that underflow f32's normal range, so each
+//! score `|x|² − 2 q·x` is off by at most some `e` (`score_err` in the
+//! `brute` module); the true nearest row scores within `2 e_max` of the
+//! f32 minimum. The band used is twice that. Coordinates far outside f32's
+//! range are first scaled by one power of two (exact in f64).
 //!
 //! The one entry point is [`nearest_rows`]: faer views of any layout in,
 //! optional guesses, knobs in [`NnParams`]:
@@ -218,21 +219,35 @@ pub fn nearest_rows(
             queries: queries.nrows(),
         });
     }
-    let strategy = params.strategy;
-    let tiles = match strategy {
-        NnStrategy::Tiles => true,
-        NnStrategy::Auto => d >= TILES_FROM && tiles::available(),
-        _ => false,
-    };
-    if tiles && let Some(found) = tiles::search_rows(Rows::of(data), Rows::of(queries), hint) {
-        return Ok(found);
+    let mut strategy = resolve(params.strategy, nx, queries.nrows(), d, hint.is_some());
+    if strategy == NnStrategy::Tiles {
+        if let Some(found) = tiles::search_rows(Rows::of(data), Rows::of(queries), hint) {
+            return Ok(found);
+        }
+        // No tiles here, or rows out of their range.
+        strategy = NnStrategy::Brute;
     }
-    let strategy = if strategy == NnStrategy::Tiles {
-        NnStrategy::Brute
-    } else {
-        strategy
-    };
     Ok(search(&owned(data), &owned(queries), strategy, hint))
+}
+
+/// The strategy [`NnStrategy::Auto`] stands for with `nx` data rows, `nq`
+/// queries of `d` coordinates (others stand for themselves). The choice
+/// follows measurements on FAUST spectral embeddings (README, "Choosing a
+/// strategy"): the tiles wherever they exist, the tree in low dimensions,
+/// the prefix search with guesses in high ones.
+fn resolve(strategy: NnStrategy, nx: usize, nq: usize, d: usize, hinted: bool) -> NnStrategy {
+    if strategy != NnStrategy::Auto {
+        return strategy;
+    }
+    if d >= TILES_FROM && tiles::available() {
+        NnStrategy::Tiles
+    } else if (1024..=PREFIX_MAX_ROWS).contains(&nx) && d >= PREFIX_FROM && hinted {
+        NnStrategy::Prefix
+    } else if (1..=TREE_MAX_DIM).contains(&d) && nx >= 4 * LEAF_DATA && nq >= 2 * LEAF_QUERY {
+        NnStrategy::Tree
+    } else {
+        NnStrategy::Brute
+    }
 }
 
 /// A column-major copy of a view (one `memcpy` per column when the
@@ -259,41 +274,15 @@ pub fn view(m: &DMatrix<f64>) -> MatRef<'_, f64> {
     MatRef::from_column_major_slice(m.as_slice(), m.nrows(), m.ncols())
 }
 
-/// The dispatcher behind [`nearest_rows`] on column-major matrices of
-/// equal width.
+/// The f32 strategies behind [`nearest_rows`] (`strategy` resolved, not
+/// `Tiles`) on column-major matrices of equal width.
 fn search(
     data: &DMatrix<f64>,
     queries: &DMatrix<f64>,
     strategy: NnStrategy,
     hint: Option<&[usize]>,
 ) -> Vec<usize> {
-    let (nx, d) = (data.nrows(), data.ncols());
-    let strategy = match strategy {
-        // The choice follows measurements on FAUST spectral embeddings
-        // (README, "Choosing a strategy"): the tree wins in low dimensions,
-        // the prefix search needs good guesses and a high dimension.
-        NnStrategy::Auto if d >= TILES_FROM && crate::tiles::available() => NnStrategy::Tiles,
-        NnStrategy::Auto => {
-            let prefix =
-                (1024..=PREFIX_MAX_ROWS).contains(&nx) && d >= PREFIX_FROM && hint.is_some();
-            if prefix {
-                NnStrategy::Prefix
-            } else if (1..=TREE_MAX_DIM).contains(&d)
-                && nx >= 4 * LEAF_DATA
-                && queries.nrows() >= 2 * LEAF_QUERY
-            {
-                NnStrategy::Tree
-            } else {
-                NnStrategy::Brute
-            }
-        }
-        s => s,
-    };
-    if strategy == NnStrategy::Tiles
-        && let Some(found) = crate::tiles::search(data, queries, hint)
-    {
-        return found;
-    }
+    let d = data.ncols();
     // The f32 strategies need coordinates well inside f32's range: far
     // below it the cross terms underflow (the band then covers every row),
     // far above it they overflow. Nearest rows do not change when both

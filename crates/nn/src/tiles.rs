@@ -39,9 +39,6 @@
 //! environment turns them off. Everything else falls back to the f32
 //! strategies.
 
-use faer::MatRef;
-use nalgebra::DMatrix;
-
 use crate::rows::Rows;
 
 /// Whether the matrix-tile search can run here (detected once).
@@ -52,21 +49,6 @@ pub fn available() -> bool {
 /// The exact nearest rows, ranked on the tiles; `None` when they are not
 /// available or a row is not finite with a norm below 1e14
 /// (where the bf16 products could overflow).
-pub(crate) fn search(
-    data: &DMatrix<f64>,
-    queries: &DMatrix<f64>,
-    hint: Option<&[usize]>,
-) -> Option<Vec<usize>> {
-    if !available() {
-        return None;
-    }
-    fn view(m: &DMatrix<f64>) -> MatRef<'_, f64> {
-        MatRef::from_column_major_slice(m.as_slice(), m.nrows(), m.ncols())
-    }
-    search_rows(Rows::of(view(data)), Rows::of(view(queries)), hint)
-}
-
-/// [`search`] on rows.
 pub(crate) fn search_rows(
     data: Rows<'_>,
     queries: Rows<'_>,
