@@ -15,8 +15,8 @@ use nalgebra::{DMatrix, DVector};
 
 use crate::factor::{Factorization, ShiftInvert};
 use crate::native::default_shift;
-use crate::verify::{RunStats, SplitMix, finish, fix_signs};
-use crate::{EigenProblem, EigenSolver, Error, Result, SpectralBasis};
+use crate::verify::SplitMix;
+use crate::{EigenProblem, EigenSolver, Error, Result, SolveStats, SpectralBasis};
 
 /// ARPACK keeps state in Fortran common blocks (timers, debug levels):
 /// calls from several threads at once are not safe, so they are serialized.
@@ -208,16 +208,16 @@ impl EigenSolver for ArpackSolver {
         let mut order: Vec<usize> = (0..k).collect();
         order.sort_by(|&a, &b| d[a].total_cmp(&d[b]));
         let eigenvalues = DVector::from_iterator(k, order.iter().map(|&i| d[i]));
-        let mut eigenvectors = DMatrix::from_fn(n, k, |r, c| z[order[c] * n + r]);
-        fix_signs(&mut eigenvectors);
-        let stats = RunStats {
+        let eigenvectors = DMatrix::from_fn(n, k, |r, c| z[order[c] * n + r]);
+        let stats = SolveStats {
             backend: "arpack",
             shift,
             restarts,
             operator_applications: applies,
             factorization_seconds: factor.seconds(),
             iteration_seconds: t0.elapsed().as_secs_f64(),
+            threads: 1,
         };
-        Ok(finish(problem, eigenvalues, eigenvectors, stats, 1))
+        SpectralBasis::from_eigenpairs(problem, eigenvalues, eigenvectors, stats)
     }
 }

@@ -5,8 +5,7 @@ use std::time::Instant;
 use faer::{Mat, Side};
 use nalgebra::{DMatrix, DVector};
 
-use crate::verify::{RunStats, finish, fix_signs};
-use crate::{EigenProblem, EigenSolver, Error, Result, SpectralBasis};
+use crate::{EigenProblem, EigenSolver, Error, Result, SolveStats, SpectralBasis};
 
 /// A dense symmetric eigendecomposition of `M^{-1/2} L M^{-1/2}` (faer's
 /// self-adjoint divide and conquer): exact to rounding, O(n³) time and
@@ -48,8 +47,7 @@ pub(crate) fn dense_pairs(
     let s = evd.S().column_vector();
     let u = evd.U();
     let eigenvalues = DVector::from_iterator(k, (0..k).map(|i| s[i]));
-    let mut eigenvectors = DMatrix::from_fn(n, k, |i, j| u[(i, j)] * d[i]);
-    fix_signs(&mut eigenvectors);
+    let eigenvectors = DMatrix::from_fn(n, k, |i, j| u[(i, j)] * d[i]);
     Ok((eigenvalues, eigenvectors))
 }
 
@@ -66,14 +64,15 @@ impl EigenSolver for DenseSolver {
         }
         let t0 = Instant::now();
         let (eigenvalues, eigenvectors) = dense_pairs(problem, k, "dense")?;
-        let stats = RunStats {
+        let stats = SolveStats {
             backend: "dense",
             shift: 0.0,
             restarts: 0,
             operator_applications: 0,
             factorization_seconds: 0.0,
             iteration_seconds: t0.elapsed().as_secs_f64(),
+            threads: 1,
         };
-        Ok(finish(problem, eigenvalues, eigenvectors, stats, 1))
+        SpectralBasis::from_eigenpairs(problem, eigenvalues, eigenvectors, stats)
     }
 }

@@ -102,6 +102,10 @@ pub enum Error {
     /// allocated.
     #[error("out of memory: {0}")]
     OutOfMemory(String),
+    /// A backend's eigenpairs do not form a basis
+    /// ([`SpectralBasis::from_eigenpairs`](crate::SpectralBasis::from_eigenpairs)).
+    #[error("invalid eigenbasis: {0}")]
+    InvalidBasis(String),
     /// An error reported by an external backend (ARPACK's info code).
     #[error("{backend} failed: {message}")]
     Backend {

@@ -53,6 +53,7 @@
 #![deny(missing_docs)]
 #![deny(unsafe_code)]
 
+pub mod conformance;
 mod dense;
 mod error;
 mod factor;
@@ -73,6 +74,7 @@ pub use dense::DenseSolver;
 pub use error::{Error, Result};
 pub use factor::{Factorization, ShiftInvert};
 pub use native::{NativeParams, NativeSolver, default_shift};
+pub use verify::SolveStats;
 
 /// A validated generalized eigenproblem `L φ = λ M φ` with a diagonal mass.
 #[derive(Debug, Clone, Copy)]
@@ -154,8 +156,8 @@ impl<'a> EigenProblem<'a> {
 
 /// A backend computing the `k` smallest eigenpairs of an [`EigenProblem`].
 ///
-/// Contract (checked by the shared conformance suite in
-/// `tests/conformance.rs`): eigenvalues ascending; eigenvectors n x k with
+/// Contract (checked by [`conformance::check`], which any backend can run,
+/// and by the mesh-based suite in `tests/conformance.rs`): eigenvalues ascending; eigenvectors n x k with
 /// `Φᵀ M Φ = I` to about `1e-12`; every eigenpair meets the backend's
 /// tolerance or the call fails with [`Error::NoConvergence`]; the sign of
 /// each eigenvector is fixed (its entry of largest magnitude is positive);

@@ -23,8 +23,8 @@ use faer::{Accum, Mat, MatMut, MatRef, Side};
 use nalgebra::{DMatrix, DVector};
 
 use crate::factor::{Factorization, ShiftInvert, par_of};
-use crate::verify::{RunStats, SplitMix, finish, fix_signs};
-use crate::{EigenProblem, EigenSolver, Error, Result, SpectralBasis};
+use crate::verify::SplitMix;
+use crate::{EigenProblem, EigenSolver, Error, Result, SolveStats, SpectralBasis};
 
 /// Options of the native backend. `Default` converges every eigenpair to
 /// near machine precision (eigenvalues agree with ARPACK's to ~1e-12).
@@ -121,15 +121,16 @@ impl EigenSolver for NativeSolver {
             // way to do the same computation.
             let t0 = Instant::now();
             let (eigenvalues, eigenvectors) = crate::dense::dense_pairs(problem, k, "native")?;
-            let stats = RunStats {
+            let stats = SolveStats {
                 backend: "native",
                 shift,
                 restarts: 0,
                 operator_applications: 0,
                 factorization_seconds: 0.0,
                 iteration_seconds: t0.elapsed().as_secs_f64(),
+                threads: p.threads,
             };
-            return Ok(finish(problem, eigenvalues, eigenvectors, stats, p.threads));
+            return SpectralBasis::from_eigenpairs(problem, eigenvalues, eigenvectors, stats);
         }
         let factor = ShiftInvert::new(problem, shift, p.threads, p.factorization)?;
         let t0 = Instant::now();
@@ -143,16 +144,16 @@ impl EigenSolver for NativeSolver {
                 *v /= di;
             }
         }
-        fix_signs(&mut eigenvectors);
-        let stats = RunStats {
+        let stats = SolveStats {
             backend: "native",
             shift,
             restarts,
             operator_applications: applies,
             factorization_seconds: factor.seconds(),
             iteration_seconds: t0.elapsed().as_secs_f64(),
+            threads: p.threads,
         };
-        Ok(finish(problem, eigenvalues, eigenvectors, stats, p.threads))
+        SpectralBasis::from_eigenpairs(problem, eigenvalues, eigenvectors, stats)
     }
 }
 

@@ -5,43 +5,111 @@ use faer::linalg::matmul::matmul;
 use faer::{Accum, MatRef};
 use nalgebra::{DMatrix, DVector};
 
-use crate::{EigenProblem, SolveReport, SpectralBasis};
+use crate::{EigenProblem, Error, Result, SolveReport, SpectralBasis};
 
-/// What a backend measured while solving; [`finish`] adds the checks.
-pub(crate) struct RunStats {
+/// What a backend measured while solving, for [`SpectralBasis::from_eigenpairs`]
+/// (which adds the residuals and the orthonormality check).
+#[derive(Debug, Clone, PartialEq)]
+#[non_exhaustive]
+pub struct SolveStats {
+    /// The backend's name ([`EigenSolver::name`](crate::EigenSolver::name)).
     pub backend: &'static str,
+    /// The shift σ of shift-invert (0 when none).
     pub shift: f64,
+    /// Restarts or outer iterations.
     pub restarts: usize,
+    /// Applications of the operator to a vector.
     pub operator_applications: usize,
+    /// Seconds spent factorizing (0 when not factorized).
     pub factorization_seconds: f64,
+    /// Seconds in the iteration.
     pub iteration_seconds: f64,
+    /// Threads for the orthonormality check (0 or 1: sequential).
+    pub threads: usize,
 }
 
-/// Assembles the basis and its report: residuals and the M-orthonormality
-/// error are computed here, the same way for every backend (and outside
-/// the timed iteration).
-pub(crate) fn finish(
-    problem: &EigenProblem<'_>,
-    eigenvalues: DVector<f64>,
-    eigenvectors: DMatrix<f64>,
-    stats: RunStats,
-    threads: usize,
-) -> SpectralBasis {
-    let report = SolveReport {
-        backend: stats.backend,
-        shift: stats.shift,
-        restarts: stats.restarts,
-        operator_applications: stats.operator_applications,
-        factorization_seconds: stats.factorization_seconds,
-        iteration_seconds: stats.iteration_seconds,
-        residuals: residuals(problem, &eigenvalues, &eigenvectors),
-        orthonormality_error: orthonormality_error(problem.mass(), &eigenvectors, threads),
-    };
-    SpectralBasis {
-        eigenvalues,
-        eigenvectors,
-        mass: DVector::from_column_slice(problem.mass()),
-        report,
+impl SolveStats {
+    /// Stats of `backend` with every count and time zero (set the fields
+    /// the backend measured).
+    pub fn new(backend: &'static str) -> Self {
+        SolveStats {
+            backend,
+            shift: 0.0,
+            restarts: 0,
+            operator_applications: 0,
+            factorization_seconds: 0.0,
+            iteration_seconds: 0.0,
+            threads: 1,
+        }
+    }
+}
+
+impl SpectralBasis {
+    /// The basis a backend computed, with its report: the public way for
+    /// any backend (ours use it too) to produce a [`SpectralBasis`].
+    /// `eigenvalues` ascending (length k), `eigenvectors` n x k for the n
+    /// of `problem`. Each eigenvector's sign is normalized (its entry of
+    /// largest magnitude positive), and the residuals and the
+    /// M-orthonormality error are computed here, the same way for every
+    /// backend (outside any timed iteration).
+    ///
+    /// Errors ([`Error::InvalidBasis`]): mismatched sizes, non-finite
+    /// values, eigenvalues not ascending. The accuracy is not judged here:
+    /// the report says it, and [`conformance::check`](crate::conformance::check)
+    /// tests a backend against the contract.
+    pub fn from_eigenpairs(
+        problem: &EigenProblem<'_>,
+        eigenvalues: DVector<f64>,
+        mut eigenvectors: DMatrix<f64>,
+        stats: SolveStats,
+    ) -> Result<SpectralBasis> {
+        let bad = |why: String| Err(Error::InvalidBasis(why));
+        let (n, k) = eigenvectors.shape();
+        if n != problem.n() || eigenvalues.len() != k {
+            return bad(format!(
+                "{} eigenvalues and {n} x {k} eigenvectors for a problem of size {}",
+                eigenvalues.len(),
+                problem.n()
+            ));
+        }
+        if let Some(i) = eigenvalues.iter().position(|v| !v.is_finite()) {
+            return bad(format!("eigenvalue {i} is {}", eigenvalues[i]));
+        }
+        if let Some(i) = eigenvectors.iter().position(|v| !v.is_finite()) {
+            return bad(format!(
+                "eigenvector {} has a non-finite entry",
+                i / n.max(1)
+            ));
+        }
+        if let Some(i) = (1..k).find(|&i| eigenvalues[i] < eigenvalues[i - 1]) {
+            return bad(format!(
+                "eigenvalues not ascending: λ_{} = {} > λ_{i} = {}",
+                i - 1,
+                eigenvalues[i - 1],
+                eigenvalues[i]
+            ));
+        }
+        fix_signs(&mut eigenvectors);
+        let report = SolveReport {
+            backend: stats.backend,
+            shift: stats.shift,
+            restarts: stats.restarts,
+            operator_applications: stats.operator_applications,
+            factorization_seconds: stats.factorization_seconds,
+            iteration_seconds: stats.iteration_seconds,
+            residuals: residuals(problem, &eigenvalues, &eigenvectors),
+            orthonormality_error: orthonormality_error(
+                problem.mass(),
+                &eigenvectors,
+                stats.threads,
+            ),
+        };
+        Ok(SpectralBasis {
+            eigenvalues,
+            eigenvectors,
+            mass: DVector::from_column_slice(problem.mass()),
+            report,
+        })
     }
 }
 
@@ -108,7 +176,7 @@ fn orthonormality_error(mass: &[f64], phi: &DMatrix<f64>, threads: usize) -> f64
 /// Flips each column so that its entry of largest magnitude is positive
 /// (ties: the first such entry), making outputs comparable and
 /// deterministic.
-pub(crate) fn fix_signs(phi: &mut DMatrix<f64>) {
+fn fix_signs(phi: &mut DMatrix<f64>) {
     for mut col in phi.column_iter_mut() {
         let mut best = 0.0f64;
         let mut sign = 1.0;

@@ -363,3 +363,102 @@ fn basis_projection_helpers() {
     );
     assert_eq!(t.eigenvectors.column(3), b.eigenvectors.column(3));
 }
+
+/// The exported check ([`conformance::check`], mesh-free problems with
+/// closed-form or dense-reference answers) passes for every backend here.
+#[test]
+fn every_backend_passes_the_exported_conformance_check() {
+    for s in backends() {
+        conformance::check(s.as_ref()).unwrap_or_else(|e| panic!("{e}"));
+    }
+}
+
+/// A backend that breaks one promise fails the exported check, naming it.
+#[test]
+fn the_exported_check_catches_broken_backends() {
+    /// The dense reference with one defect.
+    struct Broken(&'static str);
+    impl EigenSolver for Broken {
+        fn name(&self) -> &'static str {
+            self.0
+        }
+        fn solve(&self, p: &EigenProblem<'_>, k: usize) -> Result<SpectralBasis> {
+            let good = DenseSolver::default().solve(p, k)?;
+            let mut stats = SolveStats::new(self.0);
+            stats.iteration_seconds = 0.0;
+            match self.0 {
+                // Eigenvalues off by 1e-6 relative.
+                "biased" => SpectralBasis::from_eigenpairs(
+                    p,
+                    good.eigenvalues.map(|v| v * (1.0 + 1e-6)),
+                    good.eigenvectors,
+                    stats,
+                ),
+                // The k-th eigenvector replaced by the (k+1)-th.
+                "wrong-span" => {
+                    let more = DenseSolver::default().solve(p, (k + 1).min(p.n() - 1))?;
+                    let mut phi = good.eigenvectors.clone();
+                    if more.k() > k {
+                        phi.set_column(k - 1, &more.eigenvectors.column(k));
+                    }
+                    SpectralBasis::from_eigenpairs(p, good.eigenvalues, phi, stats)
+                }
+                // Not M-orthonormal: columns scaled by 1.001.
+                _ => SpectralBasis::from_eigenpairs(
+                    p,
+                    good.eigenvalues,
+                    good.eigenvectors * 1.001,
+                    stats,
+                ),
+            }
+        }
+    }
+    for (name, check) in [
+        ("biased", "closed-form spectrum of a periodic grid"),
+        // The periodic grid's 20th and 21st eigenvalues coincide, so the
+        // swap is harmless there; the weighted grid has no such luck.
+        ("wrong-span", "agreement with the dense reference"),
+        ("scaled", "closed-form spectrum of a periodic grid"),
+    ] {
+        let e = conformance::check(&Broken(name)).unwrap_err();
+        assert_eq!((e.backend.as_str(), e.check), (name, check), "{e}");
+    }
+}
+
+/// The public constructor rejects what is not a basis.
+#[test]
+fn from_eigenpairs_rejects_malformed_bases() {
+    let o = op(&icosphere(1.0, 1));
+    let p = EigenProblem::new(o.stiffness.view(), &o.mass).unwrap();
+    let good = DenseSolver::default().solve(&p, 4).unwrap();
+    let stats = || SolveStats::new("custom");
+    let e = |r: Result<SpectralBasis>| matches!(r, Err(Error::InvalidBasis(_)));
+    let mut descending = good.eigenvalues.clone();
+    descending.swap_rows(1, 3);
+    assert!(e(SpectralBasis::from_eigenpairs(
+        &p,
+        descending,
+        good.eigenvectors.clone(),
+        stats()
+    )));
+    let mut nan = good.eigenvectors.clone();
+    nan[(5, 2)] = f64::NAN;
+    assert!(e(SpectralBasis::from_eigenpairs(
+        &p,
+        good.eigenvalues.clone(),
+        nan,
+        stats()
+    )));
+    assert!(e(SpectralBasis::from_eigenpairs(
+        &p,
+        good.eigenvalues.rows(0, 3).into_owned(),
+        good.eigenvectors.clone(),
+        stats()
+    )));
+    // Signs are normalized: a flipped column comes back as it was.
+    let mut flipped = good.eigenvectors.clone();
+    flipped.column_mut(2).neg_mut();
+    let b = SpectralBasis::from_eigenpairs(&p, good.eigenvalues.clone(), flipped, stats()).unwrap();
+    assert_eq!(b.eigenvectors, good.eigenvectors);
+    assert_eq!(b.report.backend, "custom");
+}

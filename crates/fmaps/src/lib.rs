@@ -37,6 +37,7 @@ pub mod npy;
 pub mod pictures;
 pub mod pipeline;
 
+use std::sync::Arc;
 use std::time::Instant;
 
 pub use fmaps_descriptors as descriptors;
@@ -55,8 +56,14 @@ use eigensolve::{EigenProblem, EigenSolver, NativeParams, NativeSolver, Spectral
 use laplacian::{LaplacianParams, MassKind};
 use mesh_io::TriMesh;
 
-/// The eigensolver backends the facade can build by name.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+/// An eigensolver shared between threads (the pipeline solves both
+/// shapes side by side).
+pub type SharedSolver = Arc<dyn EigenSolver + Send + Sync>;
+
+/// The eigensolver of [`spectrum`]: a built-in backend by name, or any
+/// [`EigenSolver`] (`Backend::Custom`), e.g. a third-party backend that
+/// passes [`eigensolve::conformance::check`].
+#[derive(Clone, Default)]
 #[non_exhaustive]
 pub enum Backend {
     /// Pure-Rust shift-invert block Krylov–Schur (default).
@@ -66,6 +73,20 @@ pub enum Backend {
     Arpack,
     /// Dense reference (small meshes only).
     Dense,
+    /// Any backend, used as it is (the thread and block-size knobs of
+    /// [`SpectrumParams`] do not reach it).
+    Custom(SharedSolver),
+}
+
+impl std::fmt::Debug for Backend {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Backend::Native => f.write_str("Native"),
+            Backend::Arpack => f.write_str("Arpack"),
+            Backend::Dense => f.write_str("Dense"),
+            Backend::Custom(s) => write!(f, "Custom({:?})", s.name()),
+        }
+    }
 }
 
 impl std::str::FromStr for Backend {
@@ -83,27 +104,28 @@ impl std::str::FromStr for Backend {
 impl Backend {
     /// Builds the solver, or explains why it is not available.
     pub fn solver(
-        self,
+        &self,
         threads: usize,
         block_size: Option<usize>,
-    ) -> Result<Box<dyn EigenSolver>, eigensolve::Error> {
+    ) -> Result<SharedSolver, eigensolve::Error> {
         match self {
             Backend::Native => {
                 let d = NativeParams::default();
-                Ok(Box::new(NativeSolver::new(NativeParams {
+                Ok(Arc::new(NativeSolver::new(NativeParams {
                     threads,
                     block_size: block_size.unwrap_or(d.block_size),
                     ..d
                 })))
             }
-            Backend::Dense => Ok(Box::new(eigensolve::DenseSolver::default())),
+            Backend::Dense => Ok(Arc::new(eigensolve::DenseSolver::default())),
             #[cfg(feature = "arpack")]
-            Backend::Arpack => Ok(Box::new(eigensolve::ArpackSolver::default())),
+            Backend::Arpack => Ok(Arc::new(eigensolve::ArpackSolver::default())),
             #[cfg(not(feature = "arpack"))]
             Backend::Arpack => Err(eigensolve::Error::InvalidParameter(
                 "this fmaps was built without the ARPACK backend; rebuild with `--features arpack`"
                     .into(),
             )),
+            Backend::Custom(s) => Ok(Arc::clone(s)),
         }
     }
 }

@@ -29,6 +29,7 @@
 //! (`w_orient = 1`; without it, maps of left-right symmetric shapes flip).
 
 use rayon::prelude::*;
+use std::sync::Arc;
 use std::time::Instant;
 
 use fmaps_descriptors as descriptors;
@@ -67,22 +68,42 @@ pub enum MatchError {
 }
 
 /// The refinement stage of the pipeline.
-#[derive(Debug, Clone, PartialEq, Default)]
+#[derive(Clone, Default)]
 pub enum Refinement {
     /// The initial map as solved.
     #[default]
     None,
     /// Spectral ICP at the map's size.
     Icp(refine::Icp),
-    /// ZoomOut (its `subsample` is ignored: use `samples`).
+    /// ZoomOut, its iterations optionally on farthest-point samples.
     ZoomOut {
-        /// Schedule and variants.
+        /// Schedule and variants (its `subsample` must stay `None`: the
+        /// pipeline samples the shapes itself, see `samples`).
         zoomout: refine::ZoomOut,
         /// Run the iterations on this many farthest points per shape
         /// (Euclidean farthest point sampling from vertex 0); `None`: all
         /// vertices.
         samples: Option<usize>,
     },
+    /// Any [`Refiner`], given `C_BA` between the bases of the target and
+    /// the source (the pipeline's map is `T_AB`, so its refiner's "A" is
+    /// the target shape: see [`refine_result`]).
+    Custom(Arc<dyn Refiner>),
+}
+
+impl std::fmt::Debug for Refinement {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Refinement::None => f.write_str("None"),
+            Refinement::Icp(icp) => f.debug_tuple("Icp").field(icp).finish(),
+            Refinement::ZoomOut { zoomout, samples } => f
+                .debug_struct("ZoomOut")
+                .field("zoomout", zoomout)
+                .field("samples", samples)
+                .finish(),
+            Refinement::Custom(r) => write!(f, "Custom({:?})", r.name()),
+        }
+    }
 }
 
 impl Refinement {
@@ -103,8 +124,9 @@ impl Refinement {
     pub fn k_needed(&self) -> usize {
         match self {
             Refinement::None => 0,
-            Refinement::Icp(_) => 0,
-            Refinement::ZoomOut { zoomout, .. } => zoomout.k_final,
+            Refinement::Icp(icp) => icp.k_needed(),
+            Refinement::ZoomOut { zoomout, .. } => zoomout.k_needed(),
+            Refinement::Custom(r) => r.k_needed(),
         }
     }
 }
@@ -247,6 +269,14 @@ impl MatchParams {
         }
         if self.n_descr == 0 || self.subsample == 0 {
             return bad("n_descr and subsample must be positive".into());
+        }
+        if let Refinement::ZoomOut { zoomout, .. } = &self.refine
+            && zoomout.subsample.is_some()
+        {
+            return bad(
+                "Refinement::ZoomOut samples the shapes itself: set `samples`, not `zoomout.subsample`"
+                    .into(),
+            );
         }
         if self.refine.k_needed() > self.k_process {
             return bad(format!(
@@ -569,6 +599,7 @@ pub fn match_prepared(
             });
             refine_result(&mut out, a, b, &zo)?;
         }
+        Refinement::Custom(r) => refine_result(&mut out, a, b, r.as_ref())?,
     }
     out.orientation = orientation_of(&out.t_ab, a, b)?;
     Ok(out)

@@ -40,6 +40,7 @@
 #![deny(missing_docs)]
 #![forbid(unsafe_code)]
 
+pub mod conformance;
 mod icp;
 mod linalg;
 mod orientation;
@@ -196,6 +197,13 @@ pub trait Refiner: Send + Sync {
         basis_a: &SpectralBasis,
         basis_b: &SpectralBasis,
     ) -> Result<Refined>;
+
+    /// Eigenpairs per shape the refinement needs beyond the size of the
+    /// map it is given (ZoomOut: its final size); a pipeline computes at
+    /// least this many. Default 0.
+    fn k_needed(&self) -> usize {
+        0
+    }
 }
 
 fn check_k(basis: &SpectralBasis, shape: &'static str, needed: usize) -> Result<()> {

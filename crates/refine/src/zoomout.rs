@@ -96,8 +96,11 @@ impl ZoomOut {
                 k = self.k_start
             )));
         }
-        check_k(a, "A", self.k_final)?;
-        check_k(b, "B", self.k_final)?;
+        // The map's columns and rows are coefficients of A's and B's
+        // eigenfunctions: a map wider than a basis refers to functions
+        // that do not exist.
+        check_k(a, "A", self.k_final.max(c_ab.ncols()))?;
+        check_k(b, "B", self.k_final.max(c_ab.nrows()))?;
         if let Some(s) = &self.subsample {
             for (shape, idx, n) in [("A", &s.a, a.n()), ("B", &s.b, b.n())] {
                 if let Some((at, &index)) = idx.iter().enumerate().find(|(_, v)| **v >= n) {
@@ -183,6 +186,10 @@ fn fit(
 }
 
 impl Refiner for ZoomOut {
+    fn k_needed(&self) -> usize {
+        self.k_final
+    }
+
     fn name(&self) -> String {
         let mut s = format!("zoomout {}:{}:{}", self.k_start, self.k_final, self.step);
         if self.adjoint {

@@ -361,3 +361,55 @@ fn parameter_errors() {
         }
     );
 }
+
+/// Every refiner of this crate, in its variants, passes the exported
+/// conformance check; a refiner that breaks the contract fails it.
+#[test]
+fn refiners_pass_the_exported_conformance_check() {
+    use fmaps_refine::conformance;
+    let zo = |adjoint, bijective| ZoomOut {
+        k_start: 20,
+        k_final: 50,
+        step: 5,
+        adjoint,
+        bijective,
+        ..ZoomOut::default()
+    };
+    let refiners: Vec<Box<dyn Refiner>> = vec![
+        Box::new(Icp::default()),
+        Box::new(Icp {
+            adjoint: true,
+            ..Icp::default()
+        }),
+        Box::new(zo(false, false)),
+        Box::new(zo(true, false)),
+        Box::new(zo(false, true)),
+    ];
+    for r in &refiners {
+        conformance::check(r.as_ref()).unwrap_or_else(|e| panic!("{e}"));
+    }
+
+    /// ZoomOut that then shifts every vertex of the map by one.
+    struct OffByOne(ZoomOut);
+    impl Refiner for OffByOne {
+        fn name(&self) -> String {
+            "off-by-one".into()
+        }
+        fn refine(
+            &self,
+            c_ab: &DMatrix<f64>,
+            a: &SpectralBasis,
+            b: &SpectralBasis,
+        ) -> fmaps_refine::Result<fmaps_refine::Refined> {
+            let mut r = self.0.refine(c_ab, a, b)?;
+            let n = a.n();
+            r.t_ba.iter_mut().for_each(|x| *x = (*x + 1) % n);
+            Ok(r)
+        }
+        fn k_needed(&self) -> usize {
+            self.0.k_needed()
+        }
+    }
+    let e = conformance::check(&OffByOne(zo(false, false))).unwrap_err();
+    assert_eq!(e.check, "identity self-map", "{e}");
+}
