@@ -5,9 +5,9 @@ use std::time::Instant;
 use fmaps_eigensolve::SpectralBasis;
 use nalgebra::DMatrix;
 
-use crate::linalg::{Rows, nearest_orthonormal, point_map, pullback};
 use crate::{Error, Iteration, RefineReport, Refined, Refiner, Result, check_k, count_changed};
-use fmaps_nn::NnStrategy;
+use fmaps_nn::{NnParams, NnStrategy};
+use fmaps_solve::convert::{BasisRows, Conversion, point_map, pullback};
 
 /// ICP in the spectral domain: alternate `T_BA = NN(C)` and
 /// `C ← U Vᵀ` for the SVD `U Σ Vᵀ` of `Φ_Bᵀ M_B Π_BA Φ_A`, at the input's
@@ -56,8 +56,8 @@ impl Refiner for Icp {
         check_k(basis_a, "A", ka)?;
         check_k(basis_b, "B", kb)?;
         let (phi_a, phi_b) = rayon::join(
-            || Rows::of(&basis_a.eigenvectors, ka, None),
-            || Rows::of(&basis_b.eigenvectors, kb, None),
+            || BasisRows::new(basis_a, ka),
+            || BasisRows::new(basis_b, kb),
         );
         let (phi_a, phi_b) = (&phi_a, &phi_b);
         let mass_b = basis_b.mass.as_slice();
@@ -75,14 +75,19 @@ impl Refiner for Icp {
         // whose early maps are noisy (measured: 21% less NN time at k =
         // 50; the tree is better up to 48 dimensions).
         let dim = if self.adjoint { ka } else { kb };
-        let strategy = if dim > 48 && !fmaps_nn::tiles_available() {
+        let nn_params = NnParams::with_strategy(if dim > 48 && !fmaps_nn::tiles_available() {
             NnStrategy::Prefix
         } else {
             NnStrategy::Auto
+        });
+        let conversion = if self.adjoint {
+            Conversion::Adjoint
+        } else {
+            Conversion::Direct
         };
         let nn = |c: &DMatrix<f64>, hint: Option<&[usize]>, report: &mut RefineReport| {
             let t = Instant::now();
-            let map = point_map(c, phi_a, phi_b, self.adjoint, hint, strategy)?;
+            let map = point_map(c, phi_a, phi_b, conversion, hint, &nn_params)?;
             report.nn_searches += 1;
             report.nn_seconds += t.elapsed().as_secs_f64();
             Ok::<_, Error>(map)
@@ -91,7 +96,7 @@ impl Refiner for Icp {
         let mut t_ba = nn(&c, None, &mut report)?;
         for _ in 0..self.max_iterations {
             let ti = Instant::now();
-            c = nearest_orthonormal(pullback(&t_ba, phi_a, ka, phi_b, kb, mass_b));
+            c = nearest_orthonormal(pullback(&t_ba, phi_a, ka, phi_b, kb, mass_b)?);
             let next = nn(&c, Some(&t_ba), &mut report)?;
             let changed = count_changed(Some(&t_ba), &next);
             t_ba = next;
@@ -113,4 +118,14 @@ impl Refiner for Icp {
             report,
         })
     }
+}
+
+/// The nearest orthonormal matrix `U Vᵀ` (with the rectangular identity
+/// between them for k_B ≠ k_A): orthogonal Procrustes.
+fn nearest_orthonormal(c: DMatrix<f64>) -> DMatrix<f64> {
+    let (kb, ka) = c.shape();
+    let svd = c.svd(true, true);
+    let (u, vt) = (svd.u.expect("u requested"), svd.v_t.expect("v_t requested"));
+    let r = kb.min(ka);
+    u.columns(0, r) * vt.rows(0, r)
 }

@@ -42,7 +42,6 @@
 
 pub mod conformance;
 mod icp;
-mod linalg;
 mod orientation;
 mod sampling;
 mod zoomout;
@@ -102,9 +101,6 @@ pub enum Error {
     /// A conversion failed (sizes).
     #[error(transparent)]
     Solve(#[from] fmaps_solve::Error),
-    /// The nearest-neighbour search refused its input (empty shapes).
-    #[error(transparent)]
-    Search(#[from] fmaps_nn::Error),
 }
 
 /// Result alias of this crate.

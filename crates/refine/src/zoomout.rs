@@ -5,9 +5,9 @@ use std::time::Instant;
 use fmaps_eigensolve::SpectralBasis;
 use nalgebra::DMatrix;
 
-use crate::linalg::{Rows, gather_rhs, gram, point_map, pullback};
 use crate::{Error, Iteration, RefineReport, Refined, Refiner, Result, check_k, count_changed};
-use fmaps_nn::NnStrategy;
+use fmaps_nn::NnParams;
+use fmaps_solve::convert::{BasisRows, Conversion, gram, point_map, pullback, pullback_unweighted};
 
 /// Vertices of A and of B on which the ZoomOut iterations run (the paper's
 /// fast variant); typically a few thousand farthest points per shape
@@ -131,7 +131,7 @@ impl ZoomOut {
 /// One shape's rows for the iterations: all vertices with the mass, or
 /// samples with the Gram matrix of their basis rows.
 struct Side {
-    phi: Rows,
+    phi: BasisRows,
     fit: Fit,
 }
 
@@ -141,21 +141,21 @@ enum Fit {
 }
 
 impl Side {
-    fn new(basis: &SpectralBasis, rows: Option<&[usize]>, k: usize) -> Side {
-        match rows {
+    fn new(basis: &SpectralBasis, rows: Option<&[usize]>, k: usize) -> Result<Side> {
+        Ok(match rows {
             None => Side {
-                phi: Rows::of(&basis.eigenvectors, k, None),
+                phi: BasisRows::new(basis, k),
                 fit: Fit::Mass(basis.mass.as_slice().to_vec()),
             },
             Some(rows) => {
-                let phi = Rows::of(&basis.eigenvectors, k, Some(rows));
+                let phi = BasisRows::at_vertices(basis, k, rows)?;
                 let g = gram(&phi, k);
                 Side {
                     phi,
                     fit: Fit::Gram(g),
                 }
             }
-        }
+        })
     }
 }
 
@@ -169,9 +169,9 @@ fn fit(
     k_this: usize,
 ) -> Result<DMatrix<f64>> {
     match &this.fit {
-        Fit::Mass(m) => Ok(pullback(t, &other.phi, k_other, &this.phi, k_this, m)),
+        Fit::Mass(m) => Ok(pullback(t, &other.phi, k_other, &this.phi, k_this, m)?),
         Fit::Gram(g) => {
-            let rhs = gather_rhs(t, &other.phi, k_other, &this.phi, k_this);
+            let rhs = pullback_unweighted(t, &other.phi, k_other, &this.phi, k_this)?;
             let chol = g
                 .view((0, 0), (k_this, k_this))
                 .into_owned()
@@ -214,8 +214,8 @@ impl Refiner for ZoomOut {
         self.check(c_ab, basis_a, basis_b)?;
         let kf = self.k_final;
         let sub = self.subsample.as_ref();
-        let side_a = Side::new(basis_a, sub.map(|s| s.a.as_slice()), kf);
-        let side_b = Side::new(basis_b, sub.map(|s| s.b.as_slice()), kf);
+        let side_a = Side::new(basis_a, sub.map(|s| s.a.as_slice()), kf)?;
+        let side_b = Side::new(basis_b, sub.map(|s| s.b.as_slice()), kf)?;
         let mut report = RefineReport {
             method: self.name(),
             iterations: Vec::new(),
@@ -224,13 +224,20 @@ impl Refiner for ZoomOut {
             nn_seconds: 0.0,
             seconds: 0.0,
         };
-        let mut nn = |c: &DMatrix<f64>, data: &Rows, queries: &Rows, hint: Option<&[usize]>| {
-            let t = Instant::now();
-            let map = point_map(c, data, queries, self.adjoint, hint, NnStrategy::Auto)?;
-            report.nn_searches += 1;
-            report.nn_seconds += t.elapsed().as_secs_f64();
-            Ok::<_, Error>(map)
+        let conversion = if self.adjoint {
+            Conversion::Adjoint
+        } else {
+            Conversion::Direct
         };
+        let nn_params = NnParams::default();
+        let mut nn =
+            |c: &DMatrix<f64>, data: &BasisRows, queries: &BasisRows, hint: Option<&[usize]>| {
+                let t = Instant::now();
+                let map = point_map(c, data, queries, conversion, hint, &nn_params)?;
+                report.nn_searches += 1;
+                report.nn_seconds += t.elapsed().as_secs_f64();
+                Ok::<_, Error>(map)
+            };
         let k0 = self.k_start;
         let mut c = c_ab.view((0, 0), (k0, k0)).into_owned();
         let mut prev: Option<Vec<usize>> = None;
@@ -258,8 +265,8 @@ impl Refiner for ZoomOut {
         // The output: the final C converted on all vertices.
         let t_ba = if sub.is_some() {
             let (all_a, all_b) = rayon::join(
-                || Rows::of(&basis_a.eigenvectors, kf, None),
-                || Rows::of(&basis_b.eigenvectors, kf, None),
+                || BasisRows::new(basis_a, kf),
+                || BasisRows::new(basis_b, kf),
             );
             nn(&c, &all_a, &all_b, None)?
         } else {

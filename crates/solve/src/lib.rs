@@ -32,6 +32,7 @@
 #![forbid(unsafe_code)]
 
 mod chol;
+pub mod convert;
 mod energy;
 mod normal;
 mod operators;
@@ -41,6 +42,7 @@ mod weights;
 use fmaps_eigensolve::SpectralBasis;
 use nalgebra::DMatrix;
 
+pub use convert::{BasisRows, Conversion};
 pub use energy::{
     FmapEnergy, OperatorPairs, SolveMethod, SolveReport, laplacian_mask, multiplication_operator,
     resolvent_mask,
@@ -96,23 +98,14 @@ pub fn fmap_from_point_map(
     basis_a: &SpectralBasis,
     basis_b: &SpectralBasis,
 ) -> Result<DMatrix<f64>> {
-    let (na, nb) = (basis_a.n(), basis_b.n());
-    if t_ba.len() != nb {
-        return Err(Error::SizeMismatch {
-            what: "point map T_BA length vs vertices of B",
-            found: t_ba.len(),
-            expected: nb,
-        });
-    }
-    if let Some((at, &index)) = t_ba.iter().enumerate().find(|(_, x)| **x >= na) {
-        return Err(Error::IndexOutOfRange { at, index, n: na });
-    }
-    let ka = basis_a.k();
-    // Π_BA Φ_A: row y is row t_ba[y] of Φ_A; then weight rows by M_B.
-    let pulled = DMatrix::from_fn(nb, ka, |y, j| {
-        basis_b.mass[y] * basis_a.eigenvectors[(t_ba[y], j)]
-    });
-    Ok(basis_b.eigenvectors.tr_mul(&pulled))
+    convert::pullback(
+        t_ba,
+        &BasisRows::new(basis_a, basis_a.k()),
+        basis_a.k(),
+        &BasisRows::new(basis_b, basis_b.k()),
+        basis_b.k(),
+        basis_b.mass.as_slice(),
+    )
 }
 
 /// `T_BA(y) = argmin_x ‖C_AB Φ_A(x)ᵀ − Φ_B(y)ᵀ‖`: the point map B → A of a
@@ -123,10 +116,7 @@ pub fn point_map_from_fmap(
     basis_a: &SpectralBasis,
     basis_b: &SpectralBasis,
 ) -> Result<Vec<usize>> {
-    let (kb, ka) = check_fmap(c_ab, basis_a, basis_b)?;
-    let emb_a = basis_a.eigenvectors.columns(0, ka) * c_ab.transpose(); // n_A x k_B
-    let emb_b = basis_b.eigenvectors.columns(0, kb).into_owned();
-    nearest(&emb_a, &emb_b)
+    convert_once(c_ab, basis_a, basis_b, Conversion::Direct)
 }
 
 /// The adjoint conversion: `T_BA(y) = argmin_x ‖Φ_A(x)ᵀ − C_ABᵀ Φ_B(y)ᵀ‖`,
@@ -136,22 +126,26 @@ pub fn point_map_from_fmap_adjoint(
     basis_a: &SpectralBasis,
     basis_b: &SpectralBasis,
 ) -> Result<Vec<usize>> {
-    let (kb, ka) = check_fmap(c_ab, basis_a, basis_b)?;
-    let emb_a = basis_a.eigenvectors.columns(0, ka).into_owned();
-    let emb_b = basis_b.eigenvectors.columns(0, kb) * c_ab; // n_B x k_A
-    nearest(&emb_a, &emb_b)
+    convert_once(c_ab, basis_a, basis_b, Conversion::Adjoint)
 }
 
-/// The exact nearest rows ([`fmaps_nn::nearest_rows`]); the sizes were
-/// checked by the caller.
-fn nearest(data: &DMatrix<f64>, queries: &DMatrix<f64>) -> Result<Vec<usize>> {
-    fmaps_nn::nearest_rows(
-        fmaps_nn::view(data),
-        fmaps_nn::view(queries),
+/// One conversion on fresh row-major copies of the bases (the refiners
+/// keep theirs across iterations).
+fn convert_once(
+    c_ab: &DMatrix<f64>,
+    basis_a: &SpectralBasis,
+    basis_b: &SpectralBasis,
+    conversion: Conversion,
+) -> Result<Vec<usize>> {
+    let (kb, ka) = check_fmap(c_ab, basis_a, basis_b)?;
+    convert::point_map(
+        c_ab,
+        &BasisRows::new(basis_a, ka),
+        &BasisRows::new(basis_b, kb),
+        conversion,
         None,
         &fmaps_nn::NnParams::default(),
     )
-    .map_err(Error::Search)
 }
 
 /// Transfers functions on A (n_A x d) to B through `c_ab`:

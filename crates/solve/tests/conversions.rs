@@ -114,3 +114,46 @@ fn typed_maps_round_trip_and_check_sizes() {
         Err(Error::SizeMismatch { .. })
     ));
 }
+
+/// The pull-back of the conversion module (row-major copies, chunked
+/// GEMMs) equals the formula `Φ_Bᵀ M_B Π_BA Φ_A` evaluated directly with
+/// nalgebra, on the full and a sampled set of rows, and its inputs are
+/// checked.
+#[test]
+fn pullback_equals_the_dense_formula_and_checks_its_input() {
+    use fmaps_solve::convert::{gram, pullback, pullback_unweighted};
+    let b = basis(&bumpy(), 16);
+    let n = b.n();
+    let t: Vec<usize> = (0..n).map(|y| (y * 5 + 2) % n).collect();
+    let (ra, rb) = (BasisRows::new(&b, 12), BasisRows::new(&b, 10));
+    let got = pullback(&t, &ra, 12, &rb, 10, b.mass.as_slice()).unwrap();
+    let pulled = DMatrix::from_fn(n, 12, |y, j| b.mass[y] * b.eigenvectors[(t[y], j)]);
+    let want = b.eigenvectors.columns(0, 10).transpose() * pulled;
+    assert!((&got - &want).amax() < 1e-12, "{}", (&got - &want).amax());
+    // On samples, without the mass, and the Gram matrix of the samples.
+    let samples: Vec<usize> = (0..n).step_by(3).collect();
+    let rs = BasisRows::at_vertices(&b, 10, &samples).unwrap();
+    let ts: Vec<usize> = samples.iter().map(|&y| t[y]).collect();
+    let got = pullback_unweighted(&ts, &ra, 12, &rs, 10).unwrap();
+    let phis = DMatrix::from_fn(samples.len(), 10, |r, j| b.eigenvectors[(samples[r], j)]);
+    let want = phis.transpose() * DMatrix::from_fn(ts.len(), 12, |r, j| b.eigenvectors[(ts[r], j)]);
+    assert!((&got - &want).amax() < 1e-12);
+    assert!((gram(&rs, 10) - phis.transpose() * &phis).amax() < 1e-12);
+    // Bad input is an error.
+    assert!(matches!(
+        pullback(&t[1..], &ra, 12, &rb, 10, b.mass.as_slice()),
+        Err(Error::SizeMismatch { .. })
+    ));
+    assert!(matches!(
+        pullback(&t, &ra, 13, &rb, 10, b.mass.as_slice()),
+        Err(Error::SizeMismatch { .. })
+    ));
+    assert!(matches!(
+        pullback(&t, &ra, 12, &rb, 10, &b.mass.as_slice()[1..]),
+        Err(Error::SizeMismatch { .. })
+    ));
+    assert!(matches!(
+        BasisRows::at_vertices(&b, 10, &[0, n]),
+        Err(Error::IndexOutOfRange { at: 1, .. })
+    ));
+}

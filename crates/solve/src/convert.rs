@@ -1,0 +1,293 @@
+//! The conversions between point maps and functional maps, once for the
+//! whole workspace: the point map of a functional map (direct or adjoint,
+//! by exact nearest rows in the spectral embedding) and the functional
+//! map of a point map (the pull-back `Φ_Bᵀ M_B Π_BA Φ_A`, or its
+//! unweighted form for least squares on samples), as faer GEMMs on
+//! row-major copies of the eigenvector matrices ([`BasisRows`], made once
+//! and reused: the nearest-neighbour search reads their rows in place, and
+//! the pull-back gathers whole rows). The refiners iterate on these; the
+//! one-off functions of the crate root call them too.
+
+use faer::linalg::matmul::matmul;
+use faer::{Accum, Mat, MatMut, MatRef, Par};
+use fmaps_eigensolve::SpectralBasis;
+use fmaps_nn::{NnParams, nearest_rows};
+use nalgebra::DMatrix;
+use rayon::prelude::*;
+
+use crate::{Error, Result};
+
+/// The first `k` eigenvectors of a basis (or of some of its vertices),
+/// row-major: row i holds vertex i's k coordinates.
+#[derive(Debug, Clone)]
+pub struct BasisRows {
+    v: Vec<f64>,
+    n: usize,
+    k: usize,
+}
+
+impl BasisRows {
+    /// The first `k` eigenvectors (clamped to the basis size) at every
+    /// vertex.
+    pub fn new(basis: &SpectralBasis, k: usize) -> BasisRows {
+        Self::of(&basis.eigenvectors, k.min(basis.k()), None)
+    }
+
+    /// The first `k` eigenvectors (clamped to the basis size) at the
+    /// vertices `rows`, in that order (e.g. farthest-point samples).
+    pub fn at_vertices(basis: &SpectralBasis, k: usize, rows: &[usize]) -> Result<BasisRows> {
+        if let Some((at, &index)) = rows.iter().enumerate().find(|(_, r)| **r >= basis.n()) {
+            return Err(Error::IndexOutOfRange {
+                at,
+                index,
+                n: basis.n(),
+            });
+        }
+        Ok(Self::of(&basis.eigenvectors, k.min(basis.k()), Some(rows)))
+    }
+
+    /// The first `k` columns of `m`, the rows `rows` (all when `None`).
+    fn of(m: &DMatrix<f64>, k: usize, rows: Option<&[usize]>) -> BasisRows {
+        let n = rows.map_or(m.nrows(), <[usize]>::len);
+        let mut v = vec![0.0; n * k];
+        if k > 0 {
+            // Blocks of 8 rows, column by column (contiguous reads of each
+            // column for consecutive rows), in parallel.
+            v.par_chunks_mut(8 * k).enumerate().for_each(|(b, block)| {
+                let i0 = b * 8;
+                for j in 0..k {
+                    let col = m.column(j);
+                    let col = col.as_slice();
+                    for (t, row) in block.chunks_exact_mut(k).enumerate() {
+                        row[j] = col[rows.map_or(i0 + t, |r| r[i0 + t])];
+                    }
+                }
+            });
+        }
+        BasisRows { v, n, k }
+    }
+
+    /// Row count (vertices).
+    pub fn n(&self) -> usize {
+        self.n
+    }
+
+    /// Columns kept (eigenvectors).
+    pub fn k(&self) -> usize {
+        self.k
+    }
+
+    /// The first `k` columns as a faer view (rows contiguous).
+    ///
+    /// # Panics
+    /// If `k` exceeds [`k`](Self::k).
+    #[track_caller]
+    pub fn view(&self, k: usize) -> MatRef<'_, f64> {
+        assert!(k <= self.k, "{k} columns of {}", self.k);
+        MatRef::from_row_major_slice_with_stride(&self.v, self.n, k, self.k.max(1))
+    }
+
+    /// The first `k` coordinates of row `i`.
+    fn row(&self, i: usize, k: usize) -> &[f64] {
+        &self.v[i * self.k..i * self.k + k]
+    }
+}
+
+/// Rows per partial product of [`inner`].
+const INNER_CHUNK: usize = 1024;
+
+/// `aᵀ b` for tall `a` (n x p) and `b` (n x q): partial products over
+/// fixed chunks of 1024 rows in parallel, summed in order (the small
+/// output leaves a GEMM little to split otherwise; the fixed chunks keep
+/// the result independent of the thread count).
+fn inner(a: MatRef<'_, f64>, b: MatRef<'_, f64>) -> DMatrix<f64> {
+    let (n, p, q) = (a.nrows(), a.ncols(), b.ncols());
+    let starts: Vec<usize> = (0..n).step_by(INNER_CHUNK).collect();
+    let parts: Vec<Mat<f64>> = starts
+        .par_iter()
+        .map(|&r0| {
+            let rows = INNER_CHUNK.min(n - r0);
+            let mut part = Mat::<f64>::zeros(p, q);
+            matmul(
+                part.as_mut(),
+                Accum::Replace,
+                a.subrows(r0, rows).transpose(),
+                b.subrows(r0, rows),
+                1.0,
+                Par::Seq,
+            );
+            part
+        })
+        .collect();
+    DMatrix::from_fn(p, q, |i, j| parts.iter().map(|m| m[(i, j)]).sum())
+}
+
+/// `a · b` into a new row-major n x q buffer.
+fn product_rows(a: MatRef<'_, f64>, b: MatRef<'_, f64>) -> Vec<f64> {
+    let (n, q) = (a.nrows(), b.ncols());
+    let mut out = vec![0.0; n * q];
+    matmul(
+        MatMut::from_row_major_slice_mut(&mut out, n, q),
+        Accum::Replace,
+        a,
+        b,
+        1.0,
+        Par::rayon(0),
+    );
+    out
+}
+
+/// How a functional map is converted to a point map.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Conversion {
+    /// `T_BA(y) = argmin_x ‖C_AB Φ_A(x)ᵀ − Φ_B(y)ᵀ‖`.
+    #[default]
+    Direct,
+    /// `T_BA(y) = argmin_x ‖Φ_A(x)ᵀ − C_ABᵀ Φ_B(y)ᵀ‖`, better when `C_AB`
+    /// is far from square-orthonormal.
+    Adjoint,
+}
+
+/// The point map `T_BA` (one vertex of A per row of `phi_b`) of the
+/// k_B x k_A map `c_ab`, on the spectral embeddings direct `(Φ_A Cᵀ,
+/// Φ_B)` or adjoint `(Φ_A, Φ_B C)`. `hint`: a guess of the answer per row
+/// of `phi_b` (the previous iteration's map), speed only, never the
+/// result (ignored when its length is not n_B).
+///
+/// Errors: `c_ab` larger than the rows hold; empty shapes.
+pub fn point_map(
+    c_ab: &DMatrix<f64>,
+    phi_a: &BasisRows,
+    phi_b: &BasisRows,
+    conversion: Conversion,
+    hint: Option<&[usize]>,
+    params: &NnParams,
+) -> Result<Vec<usize>> {
+    let (kb, ka) = c_ab.shape();
+    check_cols("C_AB columns vs eigenvectors of A", ka, phi_a)?;
+    check_cols("C_AB rows vs eigenvectors of B", kb, phi_b)?;
+    let c = MatRef::from_column_major_slice(c_ab.as_slice(), kb, ka);
+    // One guess per query (a vertex of B) or none.
+    let hint = hint.filter(|h| h.len() == phi_b.n());
+    match conversion {
+        Conversion::Adjoint => {
+            // n_B x k_A
+            let queries = product_rows(phi_b.view(kb), c);
+            let queries = MatRef::from_row_major_slice(&queries, phi_b.n(), ka);
+            nearest_rows(phi_a.view(ka), queries, hint, params)
+        }
+        Conversion::Direct => {
+            // n_A x k_B
+            let data = product_rows(phi_a.view(ka), c.transpose());
+            let data = MatRef::from_row_major_slice(&data, phi_a.n(), kb);
+            nearest_rows(data, phi_b.view(kb), hint, params)
+        }
+    }
+    .map_err(Error::Search)
+}
+
+fn check_cols(what: &'static str, k: usize, rows: &BasisRows) -> Result<()> {
+    if k > rows.k() {
+        return Err(Error::SizeMismatch {
+            what,
+            found: k,
+            expected: rows.k(),
+        });
+    }
+    Ok(())
+}
+
+/// Checks a point map `t_ba` against the rows it indexes and is indexed by.
+fn check_map(t_ba: &[usize], phi_a: &BasisRows, phi_b: &BasisRows) -> Result<()> {
+    if t_ba.len() != phi_b.n() {
+        return Err(Error::SizeMismatch {
+            what: "point map T_BA length vs rows of B",
+            found: t_ba.len(),
+            expected: phi_b.n(),
+        });
+    }
+    if let Some((at, &index)) = t_ba.iter().enumerate().find(|(_, x)| **x >= phi_a.n()) {
+        return Err(Error::IndexOutOfRange {
+            at,
+            index,
+            n: phi_a.n(),
+        });
+    }
+    Ok(())
+}
+
+/// `w[y] Φ_A(T(y), :ka)` (`w` = 1 without weights), row-major n_B x ka.
+fn gathered(t_ba: &[usize], phi_a: &BasisRows, ka: usize, w: Option<&[f64]>) -> Vec<f64> {
+    let mut out = vec![0.0; t_ba.len() * ka];
+    if ka > 0 {
+        out.par_chunks_mut(64 * ka)
+            .enumerate()
+            .for_each(|(b, block)| {
+                for (t, row) in block.chunks_exact_mut(ka).enumerate() {
+                    let y = b * 64 + t;
+                    let scale = w.map_or(1.0, |w| w[y]);
+                    for (x, &v) in row.iter_mut().zip(phi_a.row(t_ba[y], ka)) {
+                        *x = v * scale;
+                    }
+                }
+            });
+    }
+    out
+}
+
+/// `C_AB = Φ_Bᵀ M_B Π_BA Φ_A` on the first `ka`/`kb` columns (k_B x k_A):
+/// the functional map of the point map `t_ba` (one row of `phi_a` per row
+/// of `phi_b`), `mass_b` the mass of B's rows.
+///
+/// Errors: sizes that do not match, indices out of range.
+pub fn pullback(
+    t_ba: &[usize],
+    phi_a: &BasisRows,
+    ka: usize,
+    phi_b: &BasisRows,
+    kb: usize,
+    mass_b: &[f64],
+) -> Result<DMatrix<f64>> {
+    check_map(t_ba, phi_a, phi_b)?;
+    check_cols("k_A vs eigenvectors of A", ka, phi_a)?;
+    check_cols("k_B vs eigenvectors of B", kb, phi_b)?;
+    if mass_b.len() != phi_b.n() {
+        return Err(Error::SizeMismatch {
+            what: "mass of B vs rows of B",
+            found: mass_b.len(),
+            expected: phi_b.n(),
+        });
+    }
+    let w = gathered(t_ba, phi_a, ka, Some(mass_b));
+    Ok(inner(
+        phi_b.view(kb),
+        MatRef::from_row_major_slice(&w, t_ba.len(), ka),
+    ))
+}
+
+/// `Φ_B[:, :kb]ᵀ Π_BA Φ_A[:, :ka]` without the mass: the right-hand side
+/// of the least-squares fit of a map on samples (with [`gram`] of B).
+///
+/// Errors: sizes that do not match, indices out of range.
+pub fn pullback_unweighted(
+    t_ba: &[usize],
+    phi_a: &BasisRows,
+    ka: usize,
+    phi_b: &BasisRows,
+    kb: usize,
+) -> Result<DMatrix<f64>> {
+    check_map(t_ba, phi_a, phi_b)?;
+    check_cols("k_A vs eigenvectors of A", ka, phi_a)?;
+    check_cols("k_B vs eigenvectors of B", kb, phi_b)?;
+    let y = gathered(t_ba, phi_a, ka, None);
+    Ok(inner(
+        phi_b.view(kb),
+        MatRef::from_row_major_slice(&y, t_ba.len(), ka),
+    ))
+}
+
+/// `Φᵀ Φ` (k x k) of the first `k` columns (clamped to the rows held).
+pub fn gram(phi: &BasisRows, k: usize) -> DMatrix<f64> {
+    let k = k.min(phi.k());
+    inner(phi.view(k), phi.view(k))
+}
