@@ -180,21 +180,13 @@ fn pipeline_method(method: &str) -> anyhow::Result<Option<PipelineMethod>> {
         match method {
             "fmaps-init" => Refinement::None,
             "fmaps-icp" => Refinement::Icp(fmaps::refine::Icp::default()),
-            "fmaps-zoomout" => Refinement::zoomout(50, 150, 5),
+            "fmaps-zoomout" => Refinement::default_zoomout(),
             m => match m.strip_prefix("fmaps-zoomout:") {
-                Some(spec) => {
-                    let v: Vec<usize> = spec
-                        .split(':')
-                        .map(str::parse)
-                        .collect::<Result<_, _>>()
-                        .with_context(|| {
-                        format!("method {m}: expected fmaps-zoomout:START:FINAL:STEP")
-                    })?;
-                    let [a, b, c] = v[..] else {
-                        bail!("method {m}: expected fmaps-zoomout:START:FINAL:STEP");
-                    };
-                    Refinement::zoomout(a, b, c)
-                }
+                Some(spec) => Refinement::ZoomOut {
+                    zoomout: fmaps::refine::ZoomOut::with_schedule(spec)
+                        .with_context(|| format!("method {m}"))?,
+                    samples: None,
+                },
                 None => return Ok(None),
             },
         },

@@ -104,7 +104,7 @@ pub fn pictures(args: &Args) -> anyhow::Result<()> {
         // pipeline without refinement, fmaps-zoomout ZoomOut 50:150:5 from
         // the default starts.
         let params = MatchParams {
-            refine: Refinement::zoomout(50, 150, 5),
+            refine: Refinement::default_zoomout(),
             starts: fmaps::pipeline::ZOOMOUT_STARTS.to_vec(),
             ..MatchParams::default()
         };

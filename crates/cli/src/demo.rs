@@ -25,7 +25,7 @@ pub(crate) fn run(out_dir: &Path, subdivisions: u32, as_json: bool) -> Result<()
     let (a, b) = (&pair.source, &pair.target);
     let n = a.n_vertices();
     let params = MatchParams {
-        refine: Refinement::zoomout(50, 150, 5),
+        refine: Refinement::default_zoomout(),
         ..MatchParams::default()
     };
     spinner.stage("Laplacians and eigenbases of both shapes");

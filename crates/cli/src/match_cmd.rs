@@ -2,6 +2,14 @@
 
 use super::*;
 
+use fmaps::pipeline::MatchParams;
+use fmaps::refine::{Icp, ZoomOut};
+
+/// The library's defaults, which the flags show and use.
+fn defaults() -> MatchParams {
+    MatchParams::default()
+}
+
 /// Options of `fmaps match`.
 #[derive(clap::Args)]
 pub(crate) struct MatchArgs {
@@ -14,33 +22,34 @@ pub(crate) struct MatchArgs {
     #[arg(long)]
     out: Option<PathBuf>,
     /// Size of the functional map (k x k).
-    #[arg(long, short = 'k', default_value_t = 50)]
+    #[arg(long, short = 'k', default_value_t = defaults().k)]
     k: usize,
     /// Eigenpairs computed per shape.
-    #[arg(long, default_value_t = 200)]
+    #[arg(long, default_value_t = defaults().k_process)]
     k_process: usize,
     /// Descriptor family.
-    #[arg(long, default_value = "wks")]
+    #[arg(long, default_value_t = defaults().descriptor)]
     descriptor: fmaps::pipeline::DescriptorKind,
     /// Descriptor samples (WKS energies or HKS times).
-    #[arg(long, default_value_t = 100)]
+    #[arg(long, default_value_t = defaults().n_descr)]
     n_descr: usize,
     /// Landmark file: one pair `a b` of 1-based vertex indices (source,
     /// target) per line, or one index used on both shapes.
     #[arg(long)]
     landmarks: Option<PathBuf>,
     /// Relative weight of the orientation-preserving term (0 = off).
-    #[arg(long, default_value_t = 1.0)]
+    #[arg(long, default_value_t = defaults().w_orient)]
     w_orient: f64,
     /// Refinement of the initial map (`--zoomout` alone implies zoomout).
     #[arg(long, value_enum)]
     refine: Option<RefineKind>,
     /// ZoomOut schedule START:FINAL:STEP (the basis grows from START to
-    /// FINAL by STEP; FINAL eigenpairs are computed if k-process is lower).
+    /// FINAL by STEP; FINAL eigenpairs are computed if k-process is lower;
+    /// default: `fmaps_refine::ZoomOut::default()`'s, 50:150:5).
     #[arg(long, value_name = "START:FINAL:STEP")]
     zoomout: Option<String>,
     /// ICP iterations (stops earlier at a fixed point).
-    #[arg(long, default_value_t = 10)]
+    #[arg(long, default_value_t = Icp::default().max_iterations)]
     icp_iterations: usize,
     /// Run the ZoomOut iterations on this many farthest points per shape
     /// (the paper's fast variant); the final map covers all vertices.
@@ -130,26 +139,17 @@ pub(crate) fn refinement(args: &MatchArgs) -> Result<fmaps::pipeline::Refinement
     let bad = |m: String| Err(input(anyhow::anyhow!(m)));
     Ok(match kind {
         RefineKind::None => Refinement::None,
-        RefineKind::Icp => Refinement::Icp(fmaps::refine::Icp {
+        RefineKind::Icp => Refinement::Icp(Icp {
             max_iterations: args.icp_iterations,
             adjoint: args.adjoint,
         }),
         RefineKind::Zoomout => {
-            let (k_start, k_final, step) = match &args.zoomout {
-                None => (50, 150, 5),
-                Some(text) => {
-                    let parts: Vec<Option<usize>> =
-                        text.split(':').map(|p| p.trim().parse().ok()).collect();
-                    match parts.as_slice() {
-                        [Some(a), Some(b), Some(c)] if *a > 0 && a <= b && *c > 0 => (*a, *b, *c),
-                        _ => {
-                            return bad(format!(
-                                "--zoomout '{text}': expected START:FINAL:STEP with 0 < START <= FINAL and STEP >= 1, e.g. 30:200:1"
-                            ));
-                        }
-                    }
-                }
+            let schedule = match &args.zoomout {
+                None => ZoomOut::default(),
+                Some(text) => ZoomOut::with_schedule(text)
+                    .map_err(|e| input(anyhow::anyhow!("--zoomout: {e}")))?,
             };
+            let (k_start, k_final, step) = (schedule.k_start, schedule.k_final, schedule.step);
             if k_start > args.k {
                 return bad(format!(
                     "--zoomout starts at {k_start}, but the initial map is only {k} x {k} (--k {k})",
@@ -157,7 +157,7 @@ pub(crate) fn refinement(args: &MatchArgs) -> Result<fmaps::pipeline::Refinement
                 ));
             }
             Refinement::ZoomOut {
-                zoomout: fmaps::refine::ZoomOut {
+                zoomout: ZoomOut {
                     k_start,
                     k_final,
                     step,
@@ -171,16 +171,13 @@ pub(crate) fn refinement(args: &MatchArgs) -> Result<fmaps::pipeline::Refinement
     })
 }
 
-pub(crate) fn match_cmd(args: &MatchArgs) -> Result<(), Failure> {
-    use fmaps::pipeline::{MatchError, MatchParams, match_shapes_with_progress};
-    let t = Instant::now();
-    let a = load(&args.source)?;
-    let b = load(&args.target)?;
-    let load_seconds = t.elapsed().as_secs_f64();
+/// The pipeline's parameters for the command line `args` (the library's
+/// defaults where a flag is not given).
+pub(crate) fn params_of(args: &MatchArgs) -> Result<MatchParams, Failure> {
     let mut params = MatchParams {
         k: args.k,
         k_process: args.k_process,
-        k_descr: 128.min(args.k_process),
+        k_descr: defaults().k_descr.min(args.k_process),
         descriptor: args.descriptor,
         n_descr: args.n_descr,
         w_orient: args.w_orient,
@@ -218,6 +215,16 @@ pub(crate) fn match_cmd(args: &MatchArgs) -> Result<(), Failure> {
     }
     params.restart_below = args.restart_below;
     params.k_process = params.k_process.max(params.refine.k_needed());
+    Ok(params)
+}
+
+pub(crate) fn match_cmd(args: &MatchArgs) -> Result<(), Failure> {
+    use fmaps::pipeline::{MatchError, match_shapes_with_progress};
+    let t = Instant::now();
+    let a = load(&args.source)?;
+    let b = load(&args.target)?;
+    let load_seconds = t.elapsed().as_secs_f64();
+    let params = params_of(args)?;
     let spinner = Spinner::new("matching");
     let r = match_shapes_with_progress(&a, &b, &params, &|s| spinner.stage(s)).map_err(
         |e| match e {
@@ -331,4 +338,80 @@ pub(crate) fn match_cmd(args: &MatchArgs) -> Result<(), Failure> {
         None => outln!(o, "(no --out: map not written)"),
     }
     emit(&o)
+}
+
+#[cfg(test)]
+mod tests {
+    use clap::Parser;
+    use fmaps::pipeline::{MatchParams, Refinement, ZOOMOUT_STARTS};
+    use fmaps::refine::{Icp, ZoomOut};
+
+    use super::params_of;
+    use crate::{Cli, Command};
+
+    fn parse(extra: &[&str]) -> MatchParams {
+        let mut argv = vec!["fmaps", "match", "a.off", "b.off"];
+        argv.extend(extra);
+        match Cli::try_parse_from(argv).unwrap().command {
+            Command::Match(args) => params_of(&args).unwrap_or_else(|_| panic!("{extra:?}")),
+            _ => unreachable!("a match command"),
+        }
+    }
+
+    /// `fmaps match` without flags runs the library's defaults, and its
+    /// refinement flags the refiners' defaults: the defaults live once.
+    #[test]
+    fn cli_defaults_are_the_library_defaults() {
+        let (p, d) = (parse(&[]), MatchParams::default());
+        assert_eq!(
+            (
+                p.k,
+                p.k_process,
+                p.k_descr,
+                p.n_descr,
+                p.descriptor,
+                p.subsample
+            ),
+            (
+                d.k,
+                d.k_process,
+                d.k_descr,
+                d.n_descr,
+                d.descriptor,
+                d.subsample
+            )
+        );
+        assert_eq!(
+            (p.w_descr, p.w_lap, p.w_dcomm, p.w_orient, p.resolvent_gamma),
+            (d.w_descr, d.w_lap, d.w_dcomm, d.w_orient, d.resolvent_gamma)
+        );
+        assert_eq!(
+            (p.adjoint, p.compress, &p.starts),
+            (d.adjoint, d.compress, &d.starts)
+        );
+        assert!(matches!(p.refine, Refinement::None));
+        match parse(&["--refine", "zoomout"]) {
+            MatchParams {
+                refine:
+                    Refinement::ZoomOut {
+                        zoomout,
+                        samples: None,
+                    },
+                starts,
+                ..
+            } => {
+                let z = ZoomOut::default();
+                assert_eq!(
+                    (zoomout.k_start, zoomout.k_final, zoomout.step),
+                    (z.k_start, z.k_final, z.step)
+                );
+                assert_eq!(starts, ZOOMOUT_STARTS.to_vec());
+            }
+            other => panic!("{:?}", other.refine),
+        }
+        match parse(&["--refine", "icp"]).refine {
+            Refinement::Icp(icp) => assert_eq!(icp, Icp::default()),
+            other => panic!("{other:?}"),
+        }
+    }
 }

@@ -120,6 +120,15 @@ impl Refinement {
         }
     }
 
+    /// ZoomOut with [`refine::ZoomOut::default`]'s schedule (50 → 150 in
+    /// steps of 5, as pyFM users run it), no sub-sampling.
+    pub fn default_zoomout() -> Self {
+        Refinement::ZoomOut {
+            zoomout: refine::ZoomOut::default(),
+            samples: None,
+        }
+    }
+
     /// The largest basis size the refinement needs.
     pub fn k_needed(&self) -> usize {
         match self {
@@ -139,6 +148,15 @@ pub enum DescriptorKind {
     Wks,
     /// Heat kernel signature (Sun et al. 2009).
     Hks,
+}
+
+impl std::fmt::Display for DescriptorKind {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            Self::Wks => "wks",
+            Self::Hks => "hks",
+        })
+    }
 }
 
 impl std::str::FromStr for DescriptorKind {

@@ -70,10 +70,28 @@ impl ZoomOut {
         let mut out = Vec::new();
         let mut k = self.k_start;
         while k < self.k_final {
-            k = (k + self.step.max(1)).min(self.k_final);
+            k = k.saturating_add(self.step.max(1)).min(self.k_final);
             out.push(k);
         }
         out
+    }
+
+    /// The default ZoomOut with the schedule `START:FINAL:STEP` (the
+    /// command line's and the evaluation's notation, e.g. `30:200:1`, the
+    /// paper's): `0 < START <= FINAL`, `STEP >= 1`.
+    pub fn with_schedule(text: &str) -> Result<ZoomOut> {
+        let parts: Vec<Option<usize>> = text.split(':').map(|p| p.trim().parse().ok()).collect();
+        match parts.as_slice() {
+            [Some(a), Some(b), Some(c)] if *a > 0 && a <= b && *c > 0 => Ok(ZoomOut {
+                k_start: *a,
+                k_final: *b,
+                step: *c,
+                ..ZoomOut::default()
+            }),
+            _ => Err(Error::InvalidParameter(format!(
+                "ZoomOut schedule '{text}': expected START:FINAL:STEP with 0 < START <= FINAL and STEP >= 1, e.g. 30:200:1"
+            ))),
+        }
     }
 
     fn check(&self, c_ab: &DMatrix<f64>, a: &SpectralBasis, b: &SpectralBasis) -> Result<()> {
