@@ -119,15 +119,7 @@ pub fn fit_check(args: &Args) -> anyhow::Result<()> {
         };
         let t = Instant::now();
         let mut energy = build_energy(&src, &tgt, &d1, &d2, &params)?;
-        normalize_weights(
-            &mut energy,
-            [
-                params.w_descr,
-                params.w_lap,
-                params.w_dcomm,
-                params.w_orient,
-            ],
-        );
+        normalize_weights(&mut energy, params.weights());
         let c_ours = energy.minimize()?;
         let secs = t.elapsed().as_secs_f64();
         // pyFM's energy is ½ Σ w_i term_i; ours Σ w_i term_i.

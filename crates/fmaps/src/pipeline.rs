@@ -265,6 +265,16 @@ impl Default for MatchParams {
 }
 
 impl MatchParams {
+    /// The relative weights of the four terms.
+    pub fn weights(&self) -> solve::PerTerm {
+        solve::PerTerm {
+            descr: self.w_descr,
+            lap: self.w_lap,
+            dcomm: self.w_dcomm,
+            orient: self.w_orient,
+        }
+    }
+
     fn check(&self) -> Result<(), MatchError> {
         let bad = |m: String| Err(MatchError::InvalidParameter(m));
         if self.k == 0 || self.k > self.k_process {
@@ -303,7 +313,7 @@ impl MatchParams {
                 self.k_process
             ));
         }
-        let w = [self.w_descr, self.w_lap, self.w_dcomm, self.w_orient];
+        let w = self.weights().as_array();
         if w.iter().any(|x| !x.is_finite() || *x < 0.0) || w.iter().sum::<f64>() <= 0.0 {
             return bad(format!(
                 "weights must be >= 0 with a positive sum, got {w:?}"
@@ -389,8 +399,8 @@ pub struct MatchResult {
     pub starts: Vec<Start>,
     /// Structural measures of the initial `C_BA`.
     pub metrics: solve::FmapMetrics,
-    /// Energy terms at the solution, unweighted `[descr, lap, dcomm, orient]`.
-    pub energy_terms: [f64; 4],
+    /// Energy terms at the solution, unweighted.
+    pub energy_terms: solve::PerTerm,
     /// The weighted energy at the solution.
     pub energy: f64,
     /// Timings.
@@ -564,15 +574,7 @@ pub fn match_prepared(
     )?;
     times.operators = t.elapsed().as_secs_f64();
     let t = Instant::now();
-    solve::normalize_weights(
-        &mut energy,
-        [
-            params.w_descr,
-            params.w_lap,
-            params.w_dcomm,
-            params.w_orient,
-        ],
-    );
+    solve::normalize_weights(&mut energy, params.weights());
     let c_ba = energy.minimize()?;
     let energy_terms = energy.terms(&c_ba);
     let energy_value = energy.weighted_sum(&energy_terms);
@@ -717,8 +719,9 @@ pub fn refine_result(
     refiner: &dyn Refiner,
 ) -> Result<(), MatchError> {
     let t = Instant::now();
-    // In the refiner's names: its "A" is our B (source of C_BA), its "B"
-    // is our A, and its T_BA is our T_AB.
+    // A point map A -> B pulls functions back from B to A, so T_AB goes
+    // with C_BA: the refiner's (c_ab, basis_a, basis_b) -> t_ba contract
+    // is applied to the pair (B, A), and its t_ba is our T_AB.
     let refined = refiner.refine(&out.c_ba, &b.basis, &a.basis)?;
     out.c_ba = refined.c_ab;
     out.t_ab = refined.t_ba;

@@ -114,6 +114,27 @@ impl SolveReport {
 /// Pairs of operators (on A: k_A x k_A, on B: k_B x k_B).
 pub type OperatorPairs = Vec<(DMatrix<f64>, DMatrix<f64>)>;
 
+/// One value per term of the energy (the terms' values at a map, their
+/// weights, or their reference scales), by name.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct PerTerm {
+    /// Descriptor preservation `‖C A − B‖²`.
+    pub descr: f64,
+    /// Laplacian commutativity (masked).
+    pub lap: f64,
+    /// Descriptor commutativity (multiplication operators).
+    pub dcomm: f64,
+    /// Orientation preservation (orientation operators).
+    pub orient: f64,
+}
+
+impl PerTerm {
+    /// `[descr, lap, dcomm, orient]`.
+    pub fn as_array(&self) -> [f64; 4] {
+        [self.descr, self.lap, self.dcomm, self.orient]
+    }
+}
+
 /// The terms and weights of the energy (see the module docs).
 #[derive(Debug, Clone)]
 pub struct FmapEnergy {
@@ -221,21 +242,32 @@ impl FmapEnergy {
         self.weighted_sum(&self.terms(c))
     }
 
-    /// `Σ w_t terms[t]` over the terms with nonzero weight: the energy,
+    /// The four weights.
+    pub fn weights(&self) -> PerTerm {
+        PerTerm {
+            descr: self.w_descr,
+            lap: self.w_lap,
+            dcomm: self.w_dcomm,
+            orient: self.w_orient,
+        }
+    }
+
+    /// `Σ w_t terms_t` over the terms with nonzero weight: the energy,
     /// given the unweighted [`terms`](Self::terms) of a map.
-    pub fn weighted_sum(&self, terms: &[f64; 4]) -> f64 {
-        [self.w_descr, self.w_lap, self.w_dcomm, self.w_orient]
+    pub fn weighted_sum(&self, terms: &PerTerm) -> f64 {
+        self.weights()
+            .as_array()
             .iter()
-            .zip(terms)
+            .zip(terms.as_array())
             .filter(|(w, _)| **w != 0.0)
             .map(|(w, t)| w * t)
             .sum()
     }
 
-    /// The values of the four terms at `c`, unweighted:
-    /// `[descr, lap, dcomm, orient]`. The operator terms are two small
-    /// GEMMs per pair, pairs in parallel, summed in a fixed order.
-    pub fn terms(&self, c: &DMatrix<f64>) -> [f64; 4] {
+    /// The values of the four terms at `c`, unweighted. The operator terms
+    /// are two small GEMMs per pair, pairs in parallel, summed in a fixed
+    /// order.
+    pub fn terms(&self, c: &DMatrix<f64>) -> PerTerm {
         let (kb, ka) = c.shape();
         let cf = MatRef::from_column_major_slice(c.as_slice(), kb, ka);
         let op_sum = |ops: &OperatorPairs| -> f64 {
@@ -254,12 +286,12 @@ impl FmapEnergy {
                 .collect();
             norms.iter().sum()
         };
-        [
-            (c * &self.descr_a - &self.descr_b).norm_squared(),
-            self.lap_mask.component_mul(&c.component_mul(c)).sum(),
-            op_sum(&self.ops),
-            op_sum(&self.orient_ops),
-        ]
+        PerTerm {
+            descr: (c * &self.descr_a - &self.descr_b).norm_squared(),
+            lap: self.lap_mask.component_mul(&c.component_mul(c)).sum(),
+            dcomm: op_sum(&self.ops),
+            orient: op_sum(&self.orient_ops),
+        }
     }
 
     /// The gradient of [`FmapEnergy::value`] at `c` (all entries, also the

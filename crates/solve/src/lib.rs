@@ -44,8 +44,8 @@ use nalgebra::DMatrix;
 
 pub use convert::{BasisRows, Conversion};
 pub use energy::{
-    FmapEnergy, OperatorPairs, SolveMethod, SolveReport, laplacian_mask, multiplication_operator,
-    resolvent_mask,
+    FmapEnergy, OperatorPairs, PerTerm, SolveMethod, SolveReport, laplacian_mask,
+    multiplication_operator, resolvent_mask,
 };
 pub use operators::{multiplication_operators, orientation_operators};
 pub use types::{FunctionalMap, PointMap};

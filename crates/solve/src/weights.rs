@@ -22,7 +22,7 @@
 
 use nalgebra::DMatrix;
 
-use crate::FmapEnergy;
+use crate::{FmapEnergy, PerTerm};
 
 /// The effective number of independent descriptors of one shape's
 /// coefficients `f` (k x p): `(tr G)² / ‖G‖²_F` with `G = Fᵀ F`, F without
@@ -42,9 +42,8 @@ pub fn effective_descriptor_count(f: &DMatrix<f64>) -> f64 {
     }
 }
 
-/// The reference scales `[τ_descr, τ_lap, τ_dcomm, τ_orient]` of the terms
-/// of `energy` (see the module docs).
-pub fn term_scales(energy: &FmapEnergy) -> [f64; 4] {
+/// The reference scales τ of the terms of `energy` (see the module docs).
+pub fn term_scales(energy: &FmapEnergy) -> PerTerm {
     let (ka, kb) = (energy.descr_a.nrows(), energy.descr_b.nrows());
     let m = ka.min(kb) as f64;
     let kk = (ka * kb) as f64;
@@ -76,26 +75,25 @@ pub fn term_scales(energy: &FmapEnergy) -> [f64; 4] {
             total * m / kk / p_eff
         }
     };
-    [
-        guard(m * descr / ka as f64 / p_eff),
-        guard(m * energy.lap_mask.sum() / kk),
-        ops_scale(&energy.ops, false),
-        ops_scale(&energy.orient_ops, true),
-    ]
+    PerTerm {
+        descr: guard(m * descr / ka as f64 / p_eff),
+        lap: guard(m * energy.lap_mask.sum() / kk),
+        dcomm: ops_scale(&energy.ops, false),
+        orient: ops_scale(&energy.orient_ops, true),
+    }
 }
 
-/// Sets the weights of `energy` from relative weights
-/// `[w_descr, w_lap, w_dcomm, w_orient]`: each divided by the sum of all
-/// four and by its term's scale ([`term_scales`]). Only the ratios of the
-/// relative weights matter.
-pub fn normalize_weights(energy: &mut FmapEnergy, relative: [f64; 4]) {
-    let total: f64 = relative.iter().sum();
+/// Sets the weights of `energy` from relative weights: each divided by
+/// the sum of all four and by its term's scale ([`term_scales`]). Only
+/// the ratios of the relative weights matter.
+pub fn normalize_weights(energy: &mut FmapEnergy, relative: PerTerm) {
+    let total: f64 = relative.as_array().iter().sum();
     let total = if total > 0.0 { total } else { 1.0 };
     let tau = term_scales(energy);
-    energy.w_descr = relative[0] / total / tau[0];
-    energy.w_lap = relative[1] / total / tau[1];
-    energy.w_dcomm = relative[2] / total / tau[2];
-    energy.w_orient = relative[3] / total / tau[3];
+    energy.w_descr = relative.descr / total / tau.descr;
+    energy.w_lap = relative.lap / total / tau.lap;
+    energy.w_dcomm = relative.dcomm / total / tau.dcomm;
+    energy.w_orient = relative.orient / total / tau.orient;
 }
 
 /// Re-expresses paired descriptors (`da`: n_A x p, `db`: n_B x p, column q

@@ -207,7 +207,15 @@ fn normalized_weights_do_not_depend_on_descriptor_scale() {
             *x *= s;
             *y *= s;
         }
-        normalize_weights(&mut e, [0.1, 1e-3, 1.0, 1.0]);
+        normalize_weights(
+            &mut e,
+            PerTerm {
+                descr: 0.1,
+                lap: 1e-3,
+                dcomm: 1.0,
+                orient: 1.0,
+            },
+        );
         e.minimize().unwrap()
     };
     let (c1, c7) = (solve(1.0), solve(7.0));
