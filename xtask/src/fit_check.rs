@@ -10,8 +10,9 @@ use std::process::Command;
 use std::time::Instant;
 
 use anyhow::bail;
-use fmaps::pipeline::{MatchParams, ShapeData, build_energy};
+use fmaps::pipeline::{MatchParams, energy_params};
 use fmaps::solve::normalize_weights;
+use fmaps::solve::{ShapeData, build_energy};
 use nalgebra::{DMatrix, DVector};
 use serde_json::json;
 
@@ -118,7 +119,7 @@ pub fn fit_check(args: &Args) -> anyhow::Result<()> {
             area: m2.sum(),
         };
         let t = Instant::now();
-        let mut energy = build_energy(&src, &tgt, &d1, &d2, &params)?;
+        let mut energy = build_energy(&src, &tgt, &d1, &d2, &energy_params(&params))?;
         normalize_weights(&mut energy, params.weights());
         let c_ours = energy.minimize()?;
         let secs = t.elapsed().as_secs_f64();

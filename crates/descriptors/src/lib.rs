@@ -311,3 +311,111 @@ fn linspace(a: f64, b: f64, n: usize) -> Vec<f64> {
             .collect(),
     }
 }
+
+/// The descriptor family.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum DescriptorKind {
+    /// Wave kernel signature (Aubry et al. 2011).
+    #[default]
+    Wks,
+    /// Heat kernel signature (Sun et al. 2009).
+    Hks,
+}
+
+impl std::fmt::Display for DescriptorKind {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            Self::Wks => "wks",
+            Self::Hks => "hks",
+        })
+    }
+}
+
+impl std::str::FromStr for DescriptorKind {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "wks" => Ok(Self::Wks),
+            "hks" => Ok(Self::Hks),
+            _ => Err(format!("unknown descriptor '{s}' (wks, hks)")),
+        }
+    }
+}
+
+/// What [`descriptor_matrix`] computes. `Default`: 100 WKS energies, every
+/// column kept.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct DescriptorParams {
+    /// The family.
+    pub kind: DescriptorKind,
+    /// Samples (WKS energies or HKS times) per family.
+    pub n: usize,
+    /// Keep every `subsample`-th column of the stacked descriptors (1: all).
+    pub subsample: usize,
+}
+
+impl Default for DescriptorParams {
+    fn default() -> Self {
+        DescriptorParams {
+            kind: DescriptorKind::Wks,
+            n: 100,
+            subsample: 1,
+        }
+    }
+}
+
+/// The descriptors of one shape as the matching pipeline uses them: the
+/// family at `n` samples (pyFM's sampling), then, with landmarks, the
+/// landmark variant of the same family, stacked column-wise; every
+/// `subsample`-th column kept; each column of unit L² norm (`mass`).
+/// Returns n_vertices x p.
+pub fn descriptor_matrix(
+    eigenvalues: &DVector<f64>,
+    eigenvectors: &DMatrix<f64>,
+    mass: &DVector<f64>,
+    landmarks: &[usize],
+    params: &DescriptorParams,
+) -> Result<DMatrix<f64>> {
+    if params.subsample == 0 {
+        return Err(Error::InvalidParameter(
+            "subsample must be at least 1".into(),
+        ));
+    }
+    let (ev, phi) = (eigenvalues, eigenvectors);
+    let mut parts = Vec::new();
+    match params.kind {
+        DescriptorKind::Wks => {
+            let p = WksParams {
+                n_energies: params.n,
+                ..Default::default()
+            };
+            parts.push(wks(ev, phi, &p)?);
+            if !landmarks.is_empty() {
+                parts.push(landmark_wks(ev, phi, landmarks, &p)?);
+            }
+        }
+        DescriptorKind::Hks => {
+            let p = HksParams {
+                n_times: params.n,
+                ..Default::default()
+            };
+            parts.push(hks(ev, phi, &p)?);
+            if !landmarks.is_empty() {
+                parts.push(landmark_hks(ev, phi, landmarks, &p)?);
+            }
+        }
+    }
+    // The kept columns, in order, across the stacked parts.
+    let columns: Vec<(usize, usize)> = parts
+        .iter()
+        .enumerate()
+        .flat_map(|(i, d)| (0..d.ncols()).map(move |j| (i, j)))
+        .step_by(params.subsample)
+        .collect();
+    let mut d = DMatrix::from_fn(phi.nrows(), columns.len(), |v, c| {
+        let (i, j) = columns[c];
+        parts[i][(v, j)]
+    });
+    normalize_columns(&mut d, mass);
+    Ok(d)
+}

@@ -185,3 +185,55 @@ fn errors() {
         Err(Error::InvalidParameter(_))
     ));
 }
+
+/// The pipeline's descriptor matrix is the family and its landmark
+/// variant side by side, every `subsample`-th column, each of unit L²
+/// norm; the HKS variant likewise.
+#[test]
+fn descriptor_matrix_stacks_subsamples_and_normalizes() {
+    let b = basis(&bumpy());
+    let (ev, phi, m) = (&b.eigenvalues, &b.eigenvectors, &b.mass);
+    let landmarks = [3, 40];
+    let p = DescriptorParams {
+        kind: DescriptorKind::Wks,
+        n: 12,
+        subsample: 2,
+    };
+    let got = descriptor_matrix(ev, phi, m, &landmarks, &p).unwrap();
+    let w = WksParams {
+        n_energies: 12,
+        ..Default::default()
+    };
+    let (a, l) = (
+        wks(ev, phi, &w).unwrap(),
+        landmark_wks(ev, phi, &landmarks, &w).unwrap(),
+    );
+    let all: Vec<_> = (0..a.ncols())
+        .map(|j| a.column(j).into_owned())
+        .chain((0..l.ncols()).map(|j| l.column(j).into_owned()))
+        .step_by(2)
+        .collect();
+    assert_eq!(got.ncols(), all.len());
+    for (j, col) in all.iter().enumerate() {
+        let norm = |c: &DVector<f64>| {
+            c.iter()
+                .zip(m.iter())
+                .map(|(d, w)| w * d * d)
+                .sum::<f64>()
+                .sqrt()
+        };
+        let want = col / norm(col);
+        assert!((got.column(j) - &want).amax() < 1e-12, "column {j}");
+        assert!((norm(&got.column(j).into_owned()) - 1.0).abs() < 1e-12);
+    }
+    let h = DescriptorParams {
+        kind: DescriptorKind::Hks,
+        ..p
+    };
+    assert_eq!(descriptor_matrix(ev, phi, m, &[], &h).unwrap().ncols(), 6);
+    let bad = DescriptorParams { subsample: 0, ..p };
+    assert!(matches!(
+        descriptor_matrix(ev, phi, m, &[], &bad),
+        Err(Error::InvalidParameter(_))
+    ));
+}

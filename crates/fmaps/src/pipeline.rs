@@ -33,11 +33,12 @@ use std::sync::Arc;
 use std::time::Instant;
 
 use fmaps_descriptors as descriptors;
+pub use fmaps_descriptors::DescriptorKind;
 use fmaps_eigensolve::SpectralBasis;
 use fmaps_mesh_io::TriMesh;
 use fmaps_refine::{self as refine, RefineReport, Refiner};
-use fmaps_solve as solve;
-use nalgebra::{DMatrix, DVector};
+use fmaps_solve::{self as solve, EnergyParams, ShapeData, build_energy};
+use nalgebra::DMatrix;
 
 use crate::{SpectrumParams, spectrum};
 
@@ -140,36 +141,6 @@ impl Refinement {
     }
 }
 
-/// The descriptor family.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-pub enum DescriptorKind {
-    /// Wave kernel signature (Aubry et al. 2011).
-    #[default]
-    Wks,
-    /// Heat kernel signature (Sun et al. 2009).
-    Hks,
-}
-
-impl std::fmt::Display for DescriptorKind {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(match self {
-            Self::Wks => "wks",
-            Self::Hks => "hks",
-        })
-    }
-}
-
-impl std::str::FromStr for DescriptorKind {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, String> {
-        match s {
-            "wks" => Ok(Self::Wks),
-            "hks" => Ok(Self::Hks),
-            _ => Err(format!("unknown descriptor '{s}' (wks, hks)")),
-        }
-    }
-}
-
 /// The further initial sizes the `fmaps match --refine zoomout` command
 /// and the `fmaps-zoomout` evaluation method use by default
 /// ([`MatchParams::starts`]): ZoomOut from initial maps of sizes 50, 20
@@ -240,6 +211,7 @@ pub struct MatchParams {
 
 impl Default for MatchParams {
     fn default() -> Self {
+        let energy = EnergyParams::default();
         Self {
             k_process: 200,
             k_descr: 128,
@@ -247,12 +219,12 @@ impl Default for MatchParams {
             descriptor: DescriptorKind::Wks,
             subsample: 1,
             k: 50,
-            w_descr: 0.1,
-            w_lap: 1e-3,
-            w_dcomm: 1.0,
-            w_orient: 1.0,
-            orient_reversing: false,
-            resolvent_gamma: Some(0.5),
+            w_descr: energy.weights.descr,
+            w_lap: energy.weights.lap,
+            w_dcomm: energy.weights.dcomm,
+            w_orient: energy.weights.orient,
+            orient_reversing: energy.orient_reversing,
+            resolvent_gamma: energy.resolvent_gamma,
             landmarks: Vec::new(),
             adjoint: false,
             spectrum: SpectrumParams::default(),
@@ -462,57 +434,26 @@ pub fn match_shapes_with_progress(
     Ok(out)
 }
 
-/// The descriptors (n x p, unit L² columns) of a prepared shape.
+/// The descriptors (n x p, unit L² columns) of a prepared shape
+/// ([`descriptors::descriptor_matrix`] on its first `k_descr` eigenpairs).
 pub fn shape_descriptors(
     shape: &PreparedShape,
     landmarks: &[usize],
     params: &MatchParams,
 ) -> Result<DMatrix<f64>, MatchError> {
     let basis = shape.basis.truncate(params.k_descr);
-    let (ev, phi) = (&basis.eigenvalues, &basis.eigenvectors);
-    let mut parts = Vec::new();
-    match params.descriptor {
-        DescriptorKind::Wks => {
-            let p = descriptors::WksParams {
-                n_energies: params.n_descr,
-                ..Default::default()
-            };
-            parts.push(descriptors::wks(ev, phi, &p)?);
-            if !landmarks.is_empty() {
-                parts.push(descriptors::landmark_wks(ev, phi, landmarks, &p)?);
-            }
-        }
-        DescriptorKind::Hks => {
-            let p = descriptors::HksParams {
-                n_times: params.n_descr,
-                ..Default::default()
-            };
-            parts.push(descriptors::hks(ev, phi, &p)?);
-            if !landmarks.is_empty() {
-                parts.push(descriptors::landmark_hks(ev, phi, landmarks, &p)?);
-            }
-        }
-    }
-    let n = phi.nrows();
-    let total: usize = parts.iter().map(|d| d.ncols()).sum();
-    let keep: Vec<usize> = (0..total).step_by(params.subsample).collect();
-    let all: Vec<&DMatrix<f64>> = parts.iter().collect();
-    let column = |j: usize| -> (usize, usize) {
-        let mut j = j;
-        for (i, d) in all.iter().enumerate() {
-            if j < d.ncols() {
-                return (i, j);
-            }
-            j -= d.ncols();
-        }
-        unreachable!("column index below the total")
+    let p = descriptors::DescriptorParams {
+        kind: params.descriptor,
+        n: params.n_descr,
+        subsample: params.subsample,
     };
-    let mut d = DMatrix::from_fn(n, keep.len(), |v, c| {
-        let (i, j) = column(keep[c]);
-        all[i][(v, j)]
-    });
-    descriptors::normalize_columns(&mut d, &shape.basis.mass);
-    Ok(d)
+    Ok(descriptors::descriptor_matrix(
+        &basis.eigenvalues,
+        &basis.eigenvectors,
+        &basis.mass,
+        landmarks,
+        &p,
+    )?)
 }
 
 /// The pipeline on two prepared shapes (source `a`, target `b`).
@@ -566,11 +507,11 @@ pub fn match_prepared(
 
     let t = Instant::now();
     let mut energy = build_energy(
-        &ShapeData::of(b, &sb),
-        &ShapeData::of(a, &sa),
+        &shape_data(b, &sb),
+        &shape_data(a, &sa),
         &db,
         &da,
-        params,
+        &energy_params(params),
     )?;
     times.operators = t.elapsed().as_secs_f64();
     let t = Instant::now();
@@ -731,91 +672,23 @@ pub fn refine_result(
     Ok(())
 }
 
-/// What the energy needs of one shape, as plain arrays (so bases and
-/// descriptors from elsewhere, e.g. pyFM's, can be used as they are).
-#[derive(Debug, Clone, Copy)]
-pub struct ShapeData<'a> {
-    /// Oriented triangles.
-    pub faces: &'a [[usize; 3]],
-    /// The first k eigenvectors (n x k), M-orthonormal.
-    pub phi: &'a DMatrix<f64>,
-    /// The first k eigenvalues.
-    pub evals: &'a DVector<f64>,
-    /// The lumped mass.
-    pub mass: &'a DVector<f64>,
-    /// Total area.
-    pub area: f64,
-}
-
-impl<'a> ShapeData<'a> {
-    fn of(shape: &'a PreparedShape, truncated: &'a SpectralBasis) -> Self {
-        ShapeData {
-            faces: &shape.faces,
-            phi: &truncated.eigenvectors,
-            evals: &truncated.eigenvalues,
-            mass: &truncated.mass,
-            area: shape.area,
-        }
+/// The arrays of a prepared shape the energy needs (its basis truncated
+/// to the map's size).
+fn shape_data<'a>(shape: &'a PreparedShape, truncated: &'a SpectralBasis) -> ShapeData<'a> {
+    ShapeData {
+        faces: &shape.faces,
+        phi: &truncated.eigenvectors,
+        evals: &truncated.eigenvalues,
+        mass: &truncated.mass,
+        area: shape.area,
     }
 }
 
-/// The energy of the functional map from `src` to `tgt` (k_tgt x k_src)
-/// for descriptors `d_src` (n_src x p) and `d_tgt`: coefficients, Laplacian
-/// mask, multiplication and orientation operators for the terms with a
-/// positive weight in `params`, and the fixed first column. The weights
-/// are left at the raw relative values; call
-/// [`fmaps_solve::normalize_weights`] to scale them.
-pub fn build_energy(
-    src: &ShapeData<'_>,
-    tgt: &ShapeData<'_>,
-    d_src: &DMatrix<f64>,
-    d_tgt: &DMatrix<f64>,
-    params: &MatchParams,
-) -> Result<solve::FmapEnergy, MatchError> {
-    let project = |s: &ShapeData<'_>, d: &DMatrix<f64>| -> Result<DMatrix<f64>, MatchError> {
-        if d.nrows() != s.phi.nrows() || s.mass.len() != s.phi.nrows() {
-            return Err(MatchError::InvalidParameter(format!(
-                "descriptors have {} rows, mass {}, basis {}",
-                d.nrows(),
-                s.mass.len(),
-                s.phi.nrows()
-            )));
-        }
-        Ok(crate::eigensolve::weighted_tr_mul(s.phi, s.mass, d))
-    };
-    let mut energy = solve::FmapEnergy::new(
-        project(src, d_src)?,
-        project(tgt, d_tgt)?,
-        match params.resolvent_gamma {
-            Some(g) => solve::resolvent_mask(src.evals, tgt.evals, g),
-            None => solve::laplacian_mask(src.evals, tgt.evals),
-        },
-    );
-    energy.w_descr = params.w_descr;
-    energy.w_lap = params.w_lap;
-    energy.w_dcomm = params.w_dcomm;
-    energy.w_orient = params.w_orient;
-    if params.w_dcomm > 0.0 {
-        let (xs, xt) = rayon::join(
-            || solve::multiplication_operators(src.phi, src.mass, d_src),
-            || solve::multiplication_operators(tgt.phi, tgt.mass, d_tgt),
-        );
-        energy.ops = xs?.into_iter().zip(xt?).collect();
+/// The energy parameters of `params`.
+pub fn energy_params(params: &MatchParams) -> EnergyParams {
+    EnergyParams {
+        weights: params.weights(),
+        resolvent_gamma: params.resolvent_gamma,
+        orient_reversing: params.orient_reversing,
     }
-    if params.w_orient > 0.0 {
-        let (os, ot) = rayon::join(
-            || solve::orientation_operators(src.faces, src.phi, d_src, false),
-            || solve::orientation_operators(tgt.faces, tgt.phi, d_tgt, params.orient_reversing),
-        );
-        energy.orient_ops = os?.into_iter().zip(ot?).collect();
-    }
-    // Constants map to constants: φ_0 = ±1/sqrt(area) on both shapes.
-    let k_tgt = tgt.phi.ncols();
-    let mut c0 = DVector::zeros(k_tgt);
-    if k_tgt > 0 && src.phi.ncols() > 0 {
-        let sign = (src.phi[(0, 0)] * tgt.phi[(0, 0)]).signum();
-        c0[0] = sign * (tgt.area / src.area).sqrt();
-    }
-    energy.fixed_first_column = Some(c0);
-    Ok(energy)
 }

@@ -31,6 +31,7 @@
 #![deny(missing_docs)]
 #![forbid(unsafe_code)]
 
+mod assemble;
 mod chol;
 pub mod convert;
 mod energy;
@@ -42,6 +43,7 @@ mod weights;
 use fmaps_eigensolve::SpectralBasis;
 use nalgebra::DMatrix;
 
+pub use assemble::{EnergyParams, ShapeData, build_energy};
 pub use convert::{BasisRows, Conversion};
 pub use energy::{
     FmapEnergy, OperatorPairs, PerTerm, SolveMethod, SolveReport, laplacian_mask,
