@@ -164,9 +164,9 @@ impl ShiftInvert {
 
     /// Overwrites the n x `ncols` column-major block `rhs` with
     /// `(L − σM)⁻¹ rhs`. With several threads the columns are split among
-    /// them, each solved sequentially: measured on an 80k-vertex mesh,
-    /// faer's parallel supernodal solve of one block was 8x slower than
-    /// the sequential one, while splitting the right-hand sides scales.
+    /// them, each solved sequentially: faer's parallel supernodal solve of
+    /// one block was much slower than the sequential one on large meshes,
+    /// while splitting the right-hand sides scales (docs/tuning.md).
     ///
     /// # Panics
     /// If `rhs.len() != n * ncols`.

@@ -13,9 +13,9 @@ use crate::tree::split;
 /// Smallest dimension [`NnStrategy::Auto`] uses the prefix search from
 /// (with guesses).
 pub(crate) const PREFIX_FROM: usize = 64;
-/// Largest data size [`NnStrategy::Auto`] uses the prefix search for: on
-/// the 80k-vertex subdivided FAUST pair, 12% of the rows pass the prefix
-/// bar at k = 200 (2-5% at 5k) and brute force is twice as fast.
+/// Largest data size [`NnStrategy::Auto`] uses the prefix search for:
+/// on large meshes too many rows pass the prefix bar and brute force is
+/// faster (the crate README, "Choosing a strategy").
 pub(crate) const PREFIX_MAX_ROWS: usize = 20_000;
 
 /// The prefix search ([`NnStrategy::Prefix`]). Per block of queries, one

@@ -26,8 +26,8 @@
 //! fails with 0.9 times it.
 //!
 //! The kernel: 2 x 2 tiles of 16 x 16 f32 results (32 data rows against
-//! 32 queries), 32 coordinates per step, ~400 GMAC/s on one core here (the
-//! f32 GEMM: ~60); the data packed once per search as 16 x 32 bf16 blocks,
+//! 32 queries), 32 coordinates per step, several times the f32 GEMM rate
+//! (docs/tuning.md); the data packed once per search as 16 x 32 bf16 blocks,
 //! the queries per block of 128 in the tiles' pair layout. Scores come out
 //! one data row per 32 query lanes, so the scans (smallest lower and upper
 //! ends, then the candidates) run down the rows with no horizontal
@@ -213,9 +213,8 @@ mod imp {
     }
 
     /// A zeroed buffer whose first element is 64-byte aligned, so that no
-    /// tile row or 16-float line straddles two cache lines (measured: the
-    /// score stores took 12% of ZoomOut's time from a 4-byte aligned
-    /// buffer).
+    /// tile row or 16-float line straddles two cache lines (unaligned
+    /// score stores cost a visible share of ZoomOut: docs/tuning.md).
     struct Aligned<T> {
         buf: Vec<T>,
         off: usize,
@@ -560,7 +559,7 @@ mod imp {
                 for kc in 0..dp / 32 {
                     asm!(
                         // Loads interleaved with the products that
-                        // wait for them (measured 10% faster).
+                        // wait for them (faster: docs/tuning.md).
                         "tileloadd tmm4, [{a0} + {st} * 1]",
                         "tileloadd tmm6, [{b0} + {st} * 1]",
                         "tdpbf16ps tmm0, tmm4, tmm6",

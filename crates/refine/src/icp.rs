@@ -72,8 +72,8 @@ impl Refiner for Icp {
         // ICP's map changes little from one iteration to the next, so the
         // previous one is a good guess at every step: without matrix tiles
         // the prefix search pays from lower dimensions than in ZoomOut,
-        // whose early maps are noisy (measured: 21% less NN time at k =
-        // 50; the tree is better up to 48 dimensions).
+        // whose early maps are noisy (docs/tuning.md; the tree is better up
+        // to 48 dimensions).
         let dim = if self.adjoint { ka } else { kb };
         let nn_params = NnParams::with_strategy(if dim > 48 && !fmaps_nn::tiles_available() {
             NnStrategy::Prefix
