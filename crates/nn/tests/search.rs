@@ -3,13 +3,13 @@
 //! strategies are tuned for), guesses right and wrong, gaps below f32's
 //! resolution, and the worst case of the bf16 bound of the tiles.
 
+use fmaps_eigensolve::conformance::grid_basis;
 use fmaps_nn::{NnStrategy, PREFIX_DIM, PREFIX_MIN};
 use nalgebra::DMatrix;
 
 mod common;
 use common::{
-    basis, naive_nearest, nearest_rows, nearest_rows_hinted, nearest_rows_hinted_with,
-    nearest_rows_with,
+    naive_nearest, nearest_rows, nearest_rows_hinted, nearest_rows_hinted_with, nearest_rows_with,
 };
 
 #[test]
@@ -60,7 +60,7 @@ fn nearest_rows_matches_a_naive_search() {
 /// tree and brute force agree exactly, for every query.
 #[test]
 fn tree_search_equals_brute_force_on_spectral_embeddings() {
-    let b = basis(&common::bumpy(48, 20), 40);
+    let b = grid_basis(48, 20, 40);
     let n = b.n();
     for k in [3, 12, 40] {
         let x = b.eigenvectors.columns(0, k).into_owned();
@@ -88,7 +88,7 @@ fn tree_search_equals_brute_force_on_spectral_embeddings() {
 /// where `nearest_rows_hinted` picks it from d = 64).
 #[test]
 fn prefix_search_equals_brute_force_whatever_the_guesses() {
-    let b = basis(&common::bumpy(48, 24), 80);
+    let b = grid_basis(48, 24, 80);
     let n = b.n();
     // 16: the narrowest prefix (8 coordinates); 30, 41, 48: half of the
     // coordinates; 80: PREFIX_DIM of them.
