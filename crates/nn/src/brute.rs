@@ -15,49 +15,78 @@ const BLOCK: usize = 256;
 /// Exact at any scale (the band covers underflow); fast where the
 /// coordinates are well inside f32's range.
 pub(crate) fn brute_search(data: &DMatrix<f64>, queries: &DMatrix<f64>) -> Vec<usize> {
-    let (nx, d) = (data.nrows(), data.ncols());
-    // Row-major copies: each row contiguous, for the direct re-checks.
-    let x_rows = row_major(data, None);
-    let x_norm: Vec<f64> = x_rows
-        .chunks(d.max(1))
-        .map(|r| r.iter().map(|v| v * v).sum())
-        .collect();
-    let x_norm_max = x_norm.iter().fold(0.0f64, |a, &b| a.max(b));
-    let x32: Vec<f32> = data.as_slice().iter().map(|&v| v as f32).collect();
-    let x_mat = MatRef::from_column_major_slice(&x32, nx, d);
-    let q_rows = row_major(queries, None);
-    let nq = queries.nrows();
-    let starts: Vec<usize> = (0..nq).step_by(BLOCK).collect();
-    let blocks: Vec<Vec<usize>> = starts
-        .par_iter()
-        .map_init(
-            || Mat::<f32>::zeros(nx, BLOCK),
-            |buf, &q0| {
-                let rows = BLOCK.min(nq - q0);
-                let q = Mat::<f32>::from_fn(rows, d, |i, j| queries[(q0 + i, j)] as f32);
-                // Sᵀ = X Qᵀ (nx x rows): column i holds query i's cross
-                // terms, contiguous for the scans.
-                matmul(
-                    buf.as_mut().subcols_mut(0, rows),
-                    Accum::Replace,
-                    x_mat,
-                    q.transpose(),
-                    1.0f32,
-                    Par::Seq,
-                );
-                let mut out = Vec::with_capacity(rows);
-                for i in 0..rows {
-                    let qi = &q_rows[(q0 + i) * d..(q0 + i + 1) * d];
-                    let q_norm: f64 = qi.iter().map(|v| v * v).sum();
-                    let band = 4.0 * score_err(d, q_norm, x_norm_max);
-                    let col = &buf.col_as_slice(i)[..nx];
-                    out.push(brute_query(&x_rows, &x_norm, col, qi, band));
-                }
-                out
-            },
-        )
-        .collect();
-    blocks.into_iter().flatten().collect()
+    BruteData::new(data).search(queries)
+}
+
+/// The brute-force search's data side: prepared once, searched by any
+/// number of query sets.
+pub(crate) struct BruteData {
+    d: usize,
+    /// Rows (row-major), for the direct re-checks.
+    x_rows: Vec<f64>,
+    /// Squared row norms and their largest value.
+    x_norm: Vec<f64>,
+    x_norm_max: f64,
+    /// The data in f32, column-major (n x d).
+    x32: Vec<f32>,
+}
+
+impl BruteData {
+    pub(crate) fn new(data: &DMatrix<f64>) -> BruteData {
+        let d = data.ncols();
+        let x_rows = row_major(data, None);
+        let x_norm: Vec<f64> = x_rows
+            .chunks(d.max(1))
+            .map(|r| r.iter().map(|v| v * v).sum())
+            .collect();
+        BruteData {
+            d,
+            x_norm_max: x_norm.iter().fold(0.0f64, |a, &b| a.max(b)),
+            x_norm,
+            x32: data.as_slice().iter().map(|&v| v as f32).collect(),
+            x_rows,
+        }
+    }
+
+    /// The nearest data row of every query (same width as the data).
+    pub(crate) fn search(&self, queries: &DMatrix<f64>) -> Vec<usize> {
+        let (nx, d) = (self.x_norm.len(), self.d);
+        let (x_rows, x_norm, x_norm_max) = (&self.x_rows, &self.x_norm, self.x_norm_max);
+        let x_mat = MatRef::from_column_major_slice(&self.x32, nx, d);
+        let q_rows = row_major(queries, None);
+        let nq = queries.nrows();
+        let starts: Vec<usize> = (0..nq).step_by(BLOCK).collect();
+        let blocks: Vec<Vec<usize>> = starts
+            .par_iter()
+            .map_init(
+                || Mat::<f32>::zeros(nx, BLOCK),
+                |buf, &q0| {
+                    let rows = BLOCK.min(nq - q0);
+                    let q = Mat::<f32>::from_fn(rows, d, |i, j| queries[(q0 + i, j)] as f32);
+                    // Sᵀ = X Qᵀ (nx x rows): column i holds query i's cross
+                    // terms, contiguous for the scans.
+                    matmul(
+                        buf.as_mut().subcols_mut(0, rows),
+                        Accum::Replace,
+                        x_mat,
+                        q.transpose(),
+                        1.0f32,
+                        Par::Seq,
+                    );
+                    let mut out = Vec::with_capacity(rows);
+                    for i in 0..rows {
+                        let qi = &q_rows[(q0 + i) * d..(q0 + i + 1) * d];
+                        let q_norm: f64 = qi.iter().map(|v| v * v).sum();
+                        let band = 4.0 * score_err(d, q_norm, x_norm_max);
+                        let col = &buf.col_as_slice(i)[..nx];
+                        out.push(brute_query(x_rows, x_norm, col, qi, band));
+                    }
+                    out
+                },
+            )
+            .collect();
+        blocks.into_iter().flatten().collect()
+    }
 }
 
 /// A bound on the error of a score `|x|² − 2 q·x` whose cross term is
@@ -89,11 +118,18 @@ const F32_COMFORT: f64 = 1_073_741_824.0;
 /// wherever neither underflows (coordinates more than 2⁵⁰⁰ below the
 /// largest).
 pub(crate) fn power_of_two_scale(data: &DMatrix<f64>, queries: &DMatrix<f64>) -> Option<f64> {
-    let max = data
-        .iter()
-        .chain(queries.iter())
+    scale_for(max_abs(data).max(max_abs(queries)))
+}
+
+/// The largest finite magnitude of `m` (0 when none).
+pub(crate) fn max_abs(m: &DMatrix<f64>) -> f64 {
+    m.iter()
         .filter(|v| v.is_finite())
-        .fold(0.0f64, |a, &b| a.max(b.abs()));
+        .fold(0.0f64, |a, &b| a.max(b.abs()))
+}
+
+/// [`power_of_two_scale`] given the largest magnitude.
+pub(crate) fn scale_for(max: f64) -> Option<f64> {
     if max == 0.0 || (1.0 / F32_COMFORT..=F32_COMFORT).contains(&max) {
         return None;
     }

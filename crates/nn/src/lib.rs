@@ -65,10 +65,12 @@ mod tests;
 use faer::MatRef;
 use nalgebra::DMatrix;
 
-use brute::{brute_search, power_of_two_scale};
-use prefix::{PREFIX_FROM, PREFIX_MAX_ROWS, prefix_search};
+use std::sync::OnceLock;
+
+use brute::{BruteData, brute_search, max_abs, power_of_two_scale, scale_for};
+use prefix::{PREFIX_FROM, PREFIX_MAX_ROWS, PrefixData, prefix_search};
 use rows::Rows;
-use tree::{LEAF_DATA, LEAF_QUERY, TREE_MAX_DIM, tree_search};
+use tree::{LEAF_DATA, LEAF_QUERY, TREE_MAX_DIM, TreeData, tree_search};
 
 pub use cpu::{CpuFeatures, cpu_features};
 pub use wedge::{Fan, wedge_sums};
@@ -197,6 +199,28 @@ pub fn nearest_rows(
     params: &NnParams,
 ) -> Result<Vec<usize>> {
     let (nx, d) = (data.nrows(), data.ncols());
+    if check_input(nx, d, queries, hint)? {
+        return Ok(Vec::new());
+    }
+    let mut strategy = resolve(params.strategy, nx, queries.nrows(), d, hint.is_some());
+    if strategy == NnStrategy::Tiles {
+        if let Some(found) = tiles::search_rows(Rows::of(data), Rows::of(queries), hint) {
+            return Ok(found);
+        }
+        // No tiles here, or rows out of their range.
+        strategy = NnStrategy::Brute;
+    }
+    Ok(search(&owned(data), &owned(queries), strategy, hint))
+}
+
+/// Checks the queries and guesses against `nx` data rows of `d`
+/// coordinates; `true` when there is nothing to search (no queries).
+fn check_input(
+    nx: usize,
+    d: usize,
+    queries: MatRef<'_, f64>,
+    hint: Option<&[usize]>,
+) -> Result<bool> {
     if queries.ncols() != d {
         return Err(Error::DimensionMismatch {
             data: d,
@@ -212,22 +236,111 @@ pub fn nearest_rows(
         });
     }
     if queries.nrows() == 0 {
-        return Ok(Vec::new());
+        return Ok(true);
     }
     if nx == 0 {
         return Err(Error::NoData {
             queries: queries.nrows(),
         });
     }
-    let mut strategy = resolve(params.strategy, nx, queries.nrows(), d, hint.is_some());
-    if strategy == NnStrategy::Tiles {
-        if let Some(found) = tiles::search_rows(Rows::of(data), Rows::of(queries), hint) {
-            return Ok(found);
+    Ok(false)
+}
+
+/// A data set searched repeatedly: [`nearest_rows`] with the data-side
+/// work of each f32 strategy (row-major and f32 copies, norms, clusters,
+/// the prefix order) done the first time that strategy runs and kept for
+/// every later query set. Same answers as [`nearest_rows`]. (The tiles
+/// pack their data per search; their data side is not kept.)
+///
+/// ```
+/// use faer::Mat;
+/// use fmaps_nn::{NnParams, Searcher, nearest_rows};
+///
+/// let data = Mat::from_fn(500, 20, |i, j| ((i * 7 + j * 3) % 101) as f64);
+/// let searcher = Searcher::new(data.as_ref(), &NnParams::default());
+/// for shift in [0.25, 0.5] {
+///     let queries = Mat::from_fn(50, 20, |i, j| ((i * 13 + j) % 97) as f64 + shift);
+///     let once = nearest_rows(data.as_ref(), queries.as_ref(), None, &NnParams::default())?;
+///     assert_eq!(searcher.search(queries.as_ref(), None)?, once);
+/// }
+/// # Ok::<(), fmaps_nn::Error>(())
+/// ```
+pub struct Searcher {
+    /// The data as given (column-major copy).
+    data: DMatrix<f64>,
+    /// Its largest finite magnitude, and the power of two the prepared
+    /// strategies work in (see [`nearest_rows`]).
+    max: f64,
+    scale: Option<f64>,
+    params: NnParams,
+    brute: OnceLock<BruteData>,
+    tree: OnceLock<TreeData>,
+    prefix: OnceLock<PrefixData>,
+}
+
+impl Searcher {
+    /// A searcher of the rows of `data` (n x d, any layout; copied).
+    pub fn new(data: MatRef<'_, f64>, params: &NnParams) -> Searcher {
+        let data = owned(data);
+        let max = max_abs(&data);
+        Searcher {
+            scale: scale_for(max),
+            max,
+            data,
+            params: *params,
+            brute: OnceLock::new(),
+            tree: OnceLock::new(),
+            prefix: OnceLock::new(),
         }
-        // No tiles here, or rows out of their range.
-        strategy = NnStrategy::Brute;
     }
-    Ok(search(&owned(data), &owned(queries), strategy, hint))
+
+    /// Data rows n.
+    pub fn n(&self) -> usize {
+        self.data.nrows()
+    }
+
+    /// Coordinates per row d.
+    pub fn dim(&self) -> usize {
+        self.data.ncols()
+    }
+
+    /// For every row of `queries` (n_q x d), the index of the nearest data
+    /// row, as [`nearest_rows`] (same errors).
+    pub fn search(&self, queries: MatRef<'_, f64>, hint: Option<&[usize]>) -> Result<Vec<usize>> {
+        let (nx, d) = self.data.shape();
+        if check_input(nx, d, queries, hint)? {
+            return Ok(Vec::new());
+        }
+        let nq = queries.nrows();
+        let mut strategy = resolve(self.params.strategy, nx, nq, d, hint.is_some());
+        if strategy == NnStrategy::Tiles {
+            if let Some(found) =
+                tiles::search_rows(Rows::of(view(&self.data)), Rows::of(queries), hint)
+            {
+                return Ok(found);
+            }
+            strategy = NnStrategy::Brute;
+        }
+        let queries = owned(queries);
+        // The prepared data works in the data's scale: queries that need
+        // another one (far larger or smaller than the data) take the
+        // one-off path.
+        if scale_for(self.max.max(max_abs(&queries))) != self.scale {
+            return Ok(search(&self.data, &queries, strategy, hint));
+        }
+        let scaled = |m: &DMatrix<f64>| self.scale.map(|s| m * s);
+        let q_scaled = scaled(&queries);
+        let q = q_scaled.as_ref().unwrap_or(&queries);
+        let data = || scaled(&self.data).unwrap_or_else(|| self.data.clone());
+        Ok(match strategy {
+            NnStrategy::Tree if d > 0 => self.tree.get_or_init(|| TreeData::new(&data())).search(q),
+            NnStrategy::Prefix if d >= 2 * PREFIX_MIN => self
+                .prefix
+                .get_or_init(|| PrefixData::new(&data()))
+                .search(q, hint),
+            _ => self.brute.get_or_init(|| BruteData::new(&data())).search(q),
+        })
+    }
 }
 
 /// The strategy [`NnStrategy::Auto`] stands for with `nx` data rows, `nq`

@@ -41,101 +41,39 @@ pub(crate) fn prefix_search_with(
     hint: Option<&[usize]>,
     union_density: usize,
 ) -> Vec<usize> {
-    let (nx, d, nq) = (data.nrows(), data.ncols(), queries.nrows());
-    let m = prefix_width(d);
-    // Both sets in a spatially coherent order (principal-direction
-    // bisection on the prefix): consecutive queries then share most of
-    // their surviving rows, which stay in cache, contiguous.
-    let prefix_rows = |a: &DMatrix<f64>| -> Vec<f64> {
-        let n = a.nrows();
-        let mut out = vec![0.0; n * m];
-        for j in 0..m {
-            for (i, v) in a.column(j).iter().enumerate() {
-                out[i * m + j] = *v;
-            }
-        }
-        out
-    };
-    let (order_x, order_q) = rayon::join(
-        || {
-            let mut o: Vec<usize> = (0..nx).collect();
-            split(&prefix_rows(data), m, &mut o, 0, ORDER_LEAF);
-            o
-        },
-        || {
-            let mut o: Vec<usize> = (0..nq).collect();
-            split(&prefix_rows(queries), m, &mut o, 0, ORDER_LEAF);
-            o
-        },
+    // Both sides ordered side by side.
+    let (prefix, order_q) = rayon::join(
+        || PrefixData::new(data),
+        || query_order(queries, prefix_width(data.ncols())),
     );
-    let mut pos_x = vec![0usize; nx];
-    for (p, &i) in order_x.iter().enumerate() {
-        pos_x[i] = p;
-    }
-    let x_rows = row_major(data, Some(&order_x));
-    let q_rows = row_major(queries, Some(&order_q));
-    let xm_norm: Vec<f64> = x_rows
-        .chunks(d)
-        .map(|r| r[..m].iter().map(|v| v * v).sum())
-        .collect();
-    let xm_norm_max = xm_norm.iter().fold(0.0f64, |a, &b| a.max(b));
-    let x_norm: Vec<f64> = x_rows
-        .chunks(d)
-        .map(|r| r.iter().map(|v| v * v).sum())
-        .collect();
-    let ctx = Prefix {
-        d,
-        m,
-        union_density,
-        x_norm_max: x_norm.iter().fold(0.0f64, |a, &b| a.max(b)),
-        x_norm,
-        xn32: xm_norm.iter().map(|&v| v as f32).collect(),
-        // Column by column (each column of `data` stays in cache).
-        x32: Mat::<f32>::from_fn(nx, m, |p, j| data[(order_x[p], j)] as f32),
-        x_rows,
-        xm_norm_max,
-        q_rows,
-        order_x,
-        pos_x,
-        hint: hint.map(|h| {
-            order_q
-                .iter()
-                .map(|&i| h.get(i).copied().unwrap_or(usize::MAX))
-                .collect()
-        }),
-    };
-    let starts: Vec<usize> = (0..nq).step_by(PREFIX_BLOCK).collect();
-    let found: Vec<Vec<usize>> = starts
-        .par_iter()
-        .map_init(
-            || PrefixWork {
-                s: Mat::<f32>::zeros(nx, PREFIX_BLOCK),
-                slot: vec![u32::MAX; nx],
-            },
-            |work, &q0| {
-                let rows = PREFIX_BLOCK.min(nq - q0);
-                let q = Mat::<f32>::from_fn(rows, m, |i, j| ctx.q_rows[(q0 + i) * d + j] as f32);
-                matmul(
-                    work.s.as_mut().subcols_mut(0, rows),
-                    Accum::Replace,
-                    ctx.x32.as_ref(),
-                    q.transpose(),
-                    1.0f32,
-                    Par::Seq,
-                );
-                prefix_block(&ctx, q0, rows, work)
-            },
-        )
-        .collect();
-    let mut out = vec![0; nq];
-    for (p, x) in found.into_iter().flatten().enumerate() {
-        out[order_q[p]] = x;
+    prefix.search_ordered(queries, &order_q, hint, union_density)
+}
+
+/// The queries in a spatially coherent order (bisection on the prefix of
+/// width `m`): consecutive queries then share most of their surviving
+/// rows, which stay in cache, contiguous.
+fn query_order(queries: &DMatrix<f64>, m: usize) -> Vec<usize> {
+    let mut order_q: Vec<usize> = (0..queries.nrows()).collect();
+    split(&prefix_rows(queries, m), m, &mut order_q, 0, ORDER_LEAF);
+    order_q
+}
+
+/// The rows' leading `m` coordinates, row-major.
+fn prefix_rows(a: &DMatrix<f64>, m: usize) -> Vec<f64> {
+    let n = a.nrows();
+    let mut out = vec![0.0; n * m];
+    for j in 0..m {
+        for (i, v) in a.column(j).iter().enumerate() {
+            out[i * m + j] = *v;
+        }
     }
     out
 }
 
-/// The prefix search's data, both sets in their coherent order.
-pub(crate) struct Prefix {
+/// The prefix search's data side, in a spatially coherent order
+/// (principal-direction bisection on the prefix): prepared once, searched
+/// by any number of query sets.
+pub(crate) struct PrefixData {
     d: usize,
     m: usize,
     /// Data rows (f64, row-major), their prefix in f32 (column-major) and
@@ -144,19 +82,125 @@ pub(crate) struct Prefix {
     x32: Mat<f32>,
     xn32: Vec<f32>,
     xm_norm_max: f64,
-    /// Scores a block's union of candidates by GEMM when it holds at most
-    /// this many times the candidate pairs.
-    union_density: usize,
     /// Squared norms of the data rows (f64) and their largest value.
     x_norm: Vec<f64>,
     x_norm_max: f64,
-    /// Query rows (f64, row-major).
-    q_rows: Vec<f64>,
     /// Original index of each data position, and its inverse.
     order_x: Vec<usize>,
     pos_x: Vec<usize>,
+}
+
+impl PrefixData {
+    pub(crate) fn new(data: &DMatrix<f64>) -> PrefixData {
+        let (nx, d) = (data.nrows(), data.ncols());
+        let m = prefix_width(d);
+        let mut order_x: Vec<usize> = (0..nx).collect();
+        split(&prefix_rows(data, m), m, &mut order_x, 0, ORDER_LEAF);
+        let mut pos_x = vec![0usize; nx];
+        for (p, &i) in order_x.iter().enumerate() {
+            pos_x[i] = p;
+        }
+        let x_rows = row_major(data, Some(&order_x));
+        let xm_norm: Vec<f64> = x_rows
+            .chunks(d)
+            .map(|r| r[..m].iter().map(|v| v * v).sum())
+            .collect();
+        let xm_norm_max = xm_norm.iter().fold(0.0f64, |a, &b| a.max(b));
+        let x_norm: Vec<f64> = x_rows
+            .chunks(d)
+            .map(|r| r.iter().map(|v| v * v).sum())
+            .collect();
+        PrefixData {
+            d,
+            m,
+            x_norm_max: x_norm.iter().fold(0.0f64, |a, &b| a.max(b)),
+            x_norm,
+            xn32: xm_norm.iter().map(|&v| v as f32).collect(),
+            // Column by column (each column of `data` stays in cache).
+            x32: Mat::<f32>::from_fn(nx, m, |p, j| data[(order_x[p], j)] as f32),
+            x_rows,
+            xm_norm_max,
+            order_x,
+            pos_x,
+        }
+    }
+
+    /// The nearest data row of every query (same width as the data).
+    pub(crate) fn search(&self, queries: &DMatrix<f64>, hint: Option<&[usize]>) -> Vec<usize> {
+        let order_q = query_order(queries, self.m);
+        self.search_ordered(queries, &order_q, hint, UNION_DENSITY)
+    }
+
+    /// [`search`](Self::search) with the queries' order given.
+    fn search_ordered(
+        &self,
+        queries: &DMatrix<f64>,
+        order_q: &[usize],
+        hint: Option<&[usize]>,
+        union_density: usize,
+    ) -> Vec<usize> {
+        let (nx, d, m, nq) = (self.order_x.len(), self.d, self.m, queries.nrows());
+        let ctx = Prefix {
+            data: self,
+            union_density,
+            q_rows: row_major(queries, Some(order_q)),
+            hint: hint.map(|h| {
+                order_q
+                    .iter()
+                    .map(|&i| h.get(i).copied().unwrap_or(usize::MAX))
+                    .collect()
+            }),
+        };
+        let starts: Vec<usize> = (0..nq).step_by(PREFIX_BLOCK).collect();
+        let found: Vec<Vec<usize>> = starts
+            .par_iter()
+            .map_init(
+                || PrefixWork {
+                    s: Mat::<f32>::zeros(nx, PREFIX_BLOCK),
+                    slot: vec![u32::MAX; nx],
+                },
+                |work, &q0| {
+                    let rows = PREFIX_BLOCK.min(nq - q0);
+                    let q =
+                        Mat::<f32>::from_fn(rows, m, |i, j| ctx.q_rows[(q0 + i) * d + j] as f32);
+                    matmul(
+                        work.s.as_mut().subcols_mut(0, rows),
+                        Accum::Replace,
+                        self.x32.as_ref(),
+                        q.transpose(),
+                        1.0f32,
+                        Par::Seq,
+                    );
+                    prefix_block(&ctx, q0, rows, work)
+                },
+            )
+            .collect();
+        let mut out = vec![0; nq];
+        for (p, x) in found.into_iter().flatten().enumerate() {
+            out[order_q[p]] = x;
+        }
+        out
+    }
+}
+
+/// One prefix search: the prepared data and the queries in their
+/// coherent order (the data's fields read through `Deref`).
+pub(crate) struct Prefix<'a> {
+    data: &'a PrefixData,
+    /// Scores a block's union of candidates by GEMM when it holds at most
+    /// this many times the candidate pairs.
+    union_density: usize,
+    /// Query rows (f64, row-major).
+    q_rows: Vec<f64>,
     /// Original data index guessed for each query position.
     hint: Option<Vec<usize>>,
+}
+
+impl std::ops::Deref for Prefix<'_> {
+    type Target = PrefixData;
+    fn deref(&self) -> &PrefixData {
+        self.data
+    }
 }
 
 /// Per-thread buffers of the prefix search.
@@ -181,7 +225,7 @@ crate::cpu::dispatched! {
     /// (then, as in brute force, candidates within the rounding band of a
     /// query's best are re-checked in f64); else each candidate's f64
     /// distance is computed directly.
-    fn prefix_block(this: &Prefix, q0: usize, rows: usize, work: &mut PrefixWork) -> Vec<usize> {
+    fn prefix_block(this: &Prefix<'_>, q0: usize, rows: usize, work: &mut PrefixWork) -> Vec<usize> {
         let (d, m, nx) = (this.d, this.m, this.xn32.len());
         let mut last = usize::MAX;
         let mut cand: Vec<(f32, u32)> = Vec::new();

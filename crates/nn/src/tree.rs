@@ -136,124 +136,182 @@ pub(crate) fn split(
 /// bound. Visited clusters are scored with one f32 GEMM; candidates within
 /// the rounding band are re-checked in f64 as in the brute-force search.
 pub(crate) fn tree_search(data: &DMatrix<f64>, queries: &DMatrix<f64>) -> Vec<usize> {
-    let (nx, d, nq) = (data.nrows(), data.ncols(), queries.nrows());
-    let x_rows = row_major(data, None);
+    // Both sides prepared side by side.
+    let (tree, (q_rows, cq)) = rayon::join(|| TreeData::new(data), || query_clusters(queries));
+    tree.search_clustered(&q_rows, &cq)
+}
+
+/// The query rows (row-major) and their clusters.
+fn query_clusters(queries: &DMatrix<f64>) -> (Vec<f64>, Clusters) {
     let q_rows = row_major(queries, None);
-    let (cx, cq) = rayon::join(
-        || clusters(&x_rows, d, LEAF_DATA),
-        || clusters(&q_rows, d, LEAF_QUERY),
-    );
-    let x_norm: Vec<f64> = cx
-        .order
-        .iter()
-        .map(|&i| x_rows[i * d..(i + 1) * d].iter().map(|v| v * v).sum())
-        .collect();
-    let x_norm_max = x_norm.iter().fold(0.0f64, |a, &b| a.max(b));
-    let x32 = Mat::<f32>::from_fn(nx, d, |i, j| x_rows[cx.order[i] * d + j] as f32);
-    let m = cx.ranges.len();
-    let centers = MatRef::from_row_major_slice(&cx.centers, m, d);
-    let c_norm: Vec<f64> = cx
-        .centers
-        .chunks(d)
-        .map(|c| c.iter().map(|v| v * v).sum())
-        .collect();
-    let per_block: Vec<Vec<(usize, usize)>> = cq
-        .ranges
-        .par_iter()
-        .map(|&(start, len)| {
-            let qi: &[usize] = &cq.order[start..start + len];
-            let q64 = Mat::<f64>::from_fn(len, d, |i, j| q_rows[qi[i] * d + j]);
-            let q32 = Mat::<f32>::from_fn(len, d, |i, j| q64[(i, j)] as f32);
-            let q_norm: Vec<f64> = (0..len)
-                .map(|i| (0..d).map(|j| q64[(i, j)] * q64[(i, j)]).sum())
-                .collect();
-            // Lower bounds to every data cluster (len x m).
-            let mut g = Mat::<f64>::zeros(len, m);
-            matmul(
-                g.as_mut(),
-                Accum::Replace,
-                q64.as_ref(),
-                centers.transpose(),
-                1.0,
-                Par::Seq,
-            );
-            let lb = Mat::<f64>::from_fn(len, m, |i, j| {
-                let s = q_norm[i] + c_norm[j];
-                let d2 = (s - 2.0 * g[(i, j)] - 1e-12 * s).max(0.0);
-                (d2.sqrt() - cx.radii[j]).max(0.0).powi(2)
-            });
-            let mut visit: Vec<(f64, usize)> = (0..m)
-                .map(|j| {
-                    (
-                        (0..len).map(|i| lb[(i, j)]).fold(f64::INFINITY, f64::min),
-                        j,
-                    )
-                })
-                .collect();
-            visit.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
-            // Rounding error of a score, and the band kept for re-checks.
-            let err: Vec<f64> = q_norm
-                .iter()
-                .map(|&qn| score_err(d, qn, x_norm_max))
-                .collect();
-            let mut best = vec![f64::INFINITY; len];
-            let mut upper = vec![f64::INFINITY; len];
-            let mut cand: Vec<Vec<(usize, f64)>> = vec![Vec::new(); len];
-            let mut s = Mat::<f32>::zeros(LEAF_DATA, len);
-            for &(lb_min, j) in &visit {
-                let worst = upper.iter().fold(0.0f64, |a, &b| a.max(b));
-                if lb_min > worst {
-                    break;
-                }
-                if !(0..len).any(|i| lb[(i, j)] <= upper[i]) {
-                    continue;
-                }
-                let (x0, lx) = cx.ranges[j];
+    let cq = clusters(&q_rows, queries.ncols(), LEAF_QUERY);
+    (q_rows, cq)
+}
+
+/// The clustered search's data side: prepared once, searched by any
+/// number of query sets.
+pub(crate) struct TreeData {
+    d: usize,
+    /// Data rows, row-major, in their original order.
+    x_rows: Vec<f64>,
+    /// The data clusters.
+    cx: Clusters,
+    /// Squared norms of the rows in cluster order, and their largest.
+    x_norm: Vec<f64>,
+    x_norm_max: f64,
+    /// The rows in cluster order, f32.
+    x32: Mat<f32>,
+    /// Squared norms of the cluster centres.
+    c_norm: Vec<f64>,
+}
+
+impl TreeData {
+    pub(crate) fn new(data: &DMatrix<f64>) -> TreeData {
+        let (nx, d) = (data.nrows(), data.ncols());
+        let x_rows = row_major(data, None);
+        let cx = clusters(&x_rows, d, LEAF_DATA);
+        let x_norm: Vec<f64> = cx
+            .order
+            .iter()
+            .map(|&i| x_rows[i * d..(i + 1) * d].iter().map(|v| v * v).sum())
+            .collect();
+        let x_norm_max = x_norm.iter().fold(0.0f64, |a, &b| a.max(b));
+        let x32 = Mat::<f32>::from_fn(nx, d, |i, j| x_rows[cx.order[i] * d + j] as f32);
+        let c_norm: Vec<f64> = cx
+            .centers
+            .chunks(d)
+            .map(|c| c.iter().map(|v| v * v).sum())
+            .collect();
+        TreeData {
+            d,
+            x_rows,
+            cx,
+            x_norm,
+            x_norm_max,
+            x32,
+            c_norm,
+        }
+    }
+
+    /// The nearest data row of every query (same width as the data).
+    pub(crate) fn search(&self, queries: &DMatrix<f64>) -> Vec<usize> {
+        let (q_rows, cq) = query_clusters(queries);
+        self.search_clustered(&q_rows, &cq)
+    }
+
+    /// [`search`](Self::search) on clustered query rows.
+    fn search_clustered(&self, q_rows: &[f64], cq: &Clusters) -> Vec<usize> {
+        let TreeData {
+            d,
+            x_rows,
+            cx,
+            x_norm,
+            x_norm_max,
+            x32,
+            c_norm,
+        } = self;
+        let (d, x_norm_max) = (*d, *x_norm_max);
+        let nq = cq.order.len();
+        let m = cx.ranges.len();
+        let centers = MatRef::from_row_major_slice(&cx.centers, m, d);
+        let per_block: Vec<Vec<(usize, usize)>> = cq
+            .ranges
+            .par_iter()
+            .map(|&(start, len)| {
+                let qi: &[usize] = &cq.order[start..start + len];
+                let q64 = Mat::<f64>::from_fn(len, d, |i, j| q_rows[qi[i] * d + j]);
+                let q32 = Mat::<f32>::from_fn(len, d, |i, j| q64[(i, j)] as f32);
+                let q_norm: Vec<f64> = (0..len)
+                    .map(|i| (0..d).map(|j| q64[(i, j)] * q64[(i, j)]).sum())
+                    .collect();
+                // Lower bounds to every data cluster (len x m).
+                let mut g = Mat::<f64>::zeros(len, m);
                 matmul(
-                    s.as_mut().submatrix_mut(0, 0, lx, len),
+                    g.as_mut(),
                     Accum::Replace,
-                    x32.as_ref().subrows(x0, lx),
-                    q32.transpose(),
-                    1.0f32,
+                    q64.as_ref(),
+                    centers.transpose(),
+                    1.0,
                     Par::Seq,
                 );
-                for i in 0..len {
-                    let col = &s.col_as_slice(i)[..lx];
-                    let band = 4.0 * err[i];
-                    for t in 0..lx {
-                        let score = x_norm[x0 + t] - 2.0 * f64::from(col[t]);
-                        if score <= best[i] + band {
-                            cand[i].push((x0 + t, score));
-                            if score < best[i] {
-                                best[i] = score;
+                let lb = Mat::<f64>::from_fn(len, m, |i, j| {
+                    let s = q_norm[i] + c_norm[j];
+                    let d2 = (s - 2.0 * g[(i, j)] - 1e-12 * s).max(0.0);
+                    (d2.sqrt() - cx.radii[j]).max(0.0).powi(2)
+                });
+                let mut visit: Vec<(f64, usize)> = (0..m)
+                    .map(|j| {
+                        (
+                            (0..len).map(|i| lb[(i, j)]).fold(f64::INFINITY, f64::min),
+                            j,
+                        )
+                    })
+                    .collect();
+                visit.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+                // Rounding error of a score, and the band kept for re-checks.
+                let err: Vec<f64> = q_norm
+                    .iter()
+                    .map(|&qn| score_err(d, qn, x_norm_max))
+                    .collect();
+                let mut best = vec![f64::INFINITY; len];
+                let mut upper = vec![f64::INFINITY; len];
+                let mut cand: Vec<Vec<(usize, f64)>> = vec![Vec::new(); len];
+                let mut s = Mat::<f32>::zeros(LEAF_DATA, len);
+                for &(lb_min, j) in &visit {
+                    let worst = upper.iter().fold(0.0f64, |a, &b| a.max(b));
+                    if lb_min > worst {
+                        break;
+                    }
+                    if !(0..len).any(|i| lb[(i, j)] <= upper[i]) {
+                        continue;
+                    }
+                    let (x0, lx) = cx.ranges[j];
+                    matmul(
+                        s.as_mut().submatrix_mut(0, 0, lx, len),
+                        Accum::Replace,
+                        x32.as_ref().subrows(x0, lx),
+                        q32.transpose(),
+                        1.0f32,
+                        Par::Seq,
+                    );
+                    for i in 0..len {
+                        let col = &s.col_as_slice(i)[..lx];
+                        let band = 4.0 * err[i];
+                        for t in 0..lx {
+                            let score = x_norm[x0 + t] - 2.0 * f64::from(col[t]);
+                            if score <= best[i] + band {
+                                cand[i].push((x0 + t, score));
+                                if score < best[i] {
+                                    best[i] = score;
+                                }
                             }
                         }
+                        upper[i] = best[i] + q_norm[i] + 2.0 * err[i];
                     }
-                    upper[i] = best[i] + q_norm[i] + 2.0 * err[i];
                 }
-            }
-            (0..len)
-                .map(|i| {
-                    let q = &q_rows[qi[i] * d..(qi[i] + 1) * d];
-                    let band = 4.0 * err[i];
-                    let mut arg = (f64::INFINITY, usize::MAX);
-                    for &(pos, score) in &cand[i] {
-                        if score <= best[i] + band {
-                            let x = cx.order[pos];
-                            let dist = dist2(&x_rows[x * d..(x + 1) * d], q);
-                            if dist < arg.0 || (dist == arg.0 && x < arg.1) {
-                                arg = (dist, x);
+                (0..len)
+                    .map(|i| {
+                        let q = &q_rows[qi[i] * d..(qi[i] + 1) * d];
+                        let band = 4.0 * err[i];
+                        let mut arg = (f64::INFINITY, usize::MAX);
+                        for &(pos, score) in &cand[i] {
+                            if score <= best[i] + band {
+                                let x = cx.order[pos];
+                                let dist = dist2(&x_rows[x * d..(x + 1) * d], q);
+                                if dist < arg.0 || (dist == arg.0 && x < arg.1) {
+                                    arg = (dist, x);
+                                }
                             }
                         }
-                    }
-                    (qi[i], arg.1)
-                })
-                .collect()
-        })
-        .collect();
-    let mut out = vec![0; nq];
-    for (q, x) in per_block.into_iter().flatten() {
-        out[q] = x;
+                        (qi[i], arg.1)
+                    })
+                    .collect()
+            })
+            .collect();
+        let mut out = vec![0; nq];
+        for (q, x) in per_block.into_iter().flatten() {
+            out[q] = x;
+        }
+        out
     }
-    out
 }

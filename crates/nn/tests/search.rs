@@ -232,3 +232,54 @@ fn nearest_rows_resolves_below_f32_precision() {
         assert_eq!(nearest_rows_hinted(&x, &q, &[3]), vec![target]);
     }
 }
+
+/// A `Searcher` answers every query set as the one-off search (and the
+/// naive one) does, whatever the strategy, after its data side is kept:
+/// several query sets in a row, with and without guesses, data far
+/// outside f32's range (kept in its power-of-two scale), and queries in
+/// another scale than the data (the one-off path).
+#[test]
+fn a_searcher_answers_every_query_set_like_the_one_off_search() {
+    use fmaps_nn::{NnParams, Searcher, view};
+    let b = grid_basis(30, 24, 70);
+    for data_scale in [1.0, 1e-30] {
+        let x = b.eigenvectors.columns(0, 70).map(|v| v * data_scale);
+        // Query sets and their naive answers, the same for every strategy.
+        let rounds: Vec<(DMatrix<f64>, Vec<usize>)> = [1.0, 1.0, 1e20, 1.0]
+            .into_iter()
+            .enumerate()
+            .map(|(round, query_scale)| {
+                let q = DMatrix::from_fn(300 + 50 * round, 70, |i, j| {
+                    let r = (i * 7 + round) % 720;
+                    x[(r, j)] * query_scale
+                        + 0.05 * data_scale * ((i * 13 + j * 5 + round) as f64).sin()
+                            / (1.0 + j as f64).sqrt()
+                });
+                let want = naive_nearest(&x, &q);
+                (q, want)
+            })
+            .collect();
+        for strategy in [
+            NnStrategy::Auto,
+            NnStrategy::Brute,
+            NnStrategy::Tree,
+            NnStrategy::Prefix,
+            NnStrategy::Tiles,
+        ] {
+            let searcher = Searcher::new(view(&x), &NnParams::with_strategy(strategy));
+            assert_eq!((searcher.n(), searcher.dim()), (720, 70));
+            for (round, (q, want)) in rounds.iter().enumerate() {
+                let guess: Vec<usize> = want.iter().map(|&t| (t + round) % 720).collect();
+                for hint in [None, Some(guess.as_slice())] {
+                    assert_eq!(
+                        &searcher.search(view(q), hint).unwrap(),
+                        want,
+                        "{strategy:?}, data x{data_scale:e}, round {round}, hint {}",
+                        hint.is_some()
+                    );
+                }
+            }
+            assert!(searcher.search(view(&DMatrix::zeros(3, 5)), None).is_err());
+        }
+    }
+}
