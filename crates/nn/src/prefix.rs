@@ -184,7 +184,7 @@ impl PrefixData {
 }
 
 /// One prefix search: the prepared data and the queries in their
-/// coherent order (the data's fields read through `Deref`).
+/// coherent order.
 pub(crate) struct Prefix<'a> {
     data: &'a PrefixData,
     /// Scores a block's union of candidates by GEMM when it holds at most
@@ -194,13 +194,6 @@ pub(crate) struct Prefix<'a> {
     q_rows: Vec<f64>,
     /// Original data index guessed for each query position.
     hint: Option<Vec<usize>>,
-}
-
-impl std::ops::Deref for Prefix<'_> {
-    type Target = PrefixData;
-    fn deref(&self) -> &PrefixData {
-        self.data
-    }
 }
 
 /// Per-thread buffers of the prefix search.
@@ -225,7 +218,11 @@ crate::cpu::dispatched! {
     /// (then, as in brute force, candidates within the rounding band of a
     /// query's best are re-checked in f64); else each candidate's f64
     /// distance is computed directly.
-    fn prefix_block(this: &Prefix<'_>, q0: usize, rows: usize, work: &mut PrefixWork) -> Vec<usize> {
+    fn prefix_block(search: &Prefix<'_>, q0: usize, rows: usize, work: &mut PrefixWork) -> Vec<usize> {
+        // The query side, then the data side read directly in the loops.
+        let (q_rows, hint, union_density) =
+            (&search.q_rows[..], search.hint.as_deref(), search.union_density);
+        let this: &PrefixData = search.data;
         let (d, m, nx) = (this.d, this.m, this.xn32.len());
         let mut last = usize::MAX;
         let mut cand: Vec<(f32, u32)> = Vec::new();
@@ -236,7 +233,7 @@ crate::cpu::dispatched! {
         let mut offsets = vec![0usize];
         let mut bests = Vec::with_capacity(rows);
         #[inline(always)]
-        fn consider(this: &Prefix, qi: &[f64], p: usize, best: &mut (f64, usize)) {
+        fn consider(this: &PrefixData, qi: &[f64], p: usize, best: &mut (f64, usize)) {
             let d = this.d;
             if let Some(dk) = dist2_below(&this.x_rows[p * d..(p + 1) * d], qi, best.0)
                 && (dk < best.0 || this.order_x[p] < best.1)
@@ -245,7 +242,7 @@ crate::cpu::dispatched! {
             }
         }
         for i in 0..rows {
-            let qi = &this.q_rows[(q0 + i) * d..(q0 + i + 1) * d];
+            let qi = &q_rows[(q0 + i) * d..(q0 + i + 1) * d];
             let qm_norm: f64 = qi[..m].iter().map(|v| v * v).sum();
             let col = &work.s.col_as_slice(i)[..nx];
             // Rounding of a computed score: the f32 inputs and dot product
@@ -262,7 +259,7 @@ crate::cpu::dispatched! {
             // Upper bounds: the guess, else the best-ranked row; and the
             // previous query's answer (the queries are in coherent order,
             // so it is usually close).
-            match this.hint.as_ref().map(|h| h[q0 + i]) {
+            match hint.map(|h| h[q0 + i]) {
                 Some(h) if h < nx => consider(this.pos_x[h], &mut best),
                 _ => consider(argmin_score(&this.xn32, col), &mut best),
             }
@@ -295,7 +292,7 @@ crate::cpu::dispatched! {
                 union.push(p);
             }
         }
-        let dense = union.len() * rows <= this.union_density * flat.len();
+        let dense = union.len() * rows <= union_density * flat.len();
         if dense {
             union.sort_unstable();
             for (r, &p) in union.iter().enumerate() {
@@ -309,11 +306,11 @@ crate::cpu::dispatched! {
                 dst.iter_mut().zip(src).for_each(|(a, b)| *a = *b as f32);
             }
             let xu = MatRef::from_row_major_slice(&xu, nu, d);
-            let q = Mat::<f32>::from_fn(rows, d, |i, j| this.q_rows[(q0 + i) * d + j] as f32);
+            let q = Mat::<f32>::from_fn(rows, d, |i, j| q_rows[(q0 + i) * d + j] as f32);
             let mut full = Mat::<f32>::zeros(nu, rows);
             matmul(full.as_mut(), Accum::Replace, xu, q.transpose(), 1.0f32, Par::Seq);
             for (i, best) in bests.iter_mut().enumerate() {
-                let qi = &this.q_rows[(q0 + i) * d..(q0 + i + 1) * d];
+                let qi = &q_rows[(q0 + i) * d..(q0 + i + 1) * d];
                 let q_norm: f64 = qi.iter().map(|v| v * v).sum();
                 let col = full.col_as_slice(i);
                 let cands = &flat[offsets[i]..offsets[i + 1]];
@@ -328,7 +325,7 @@ crate::cpu::dispatched! {
             }
         } else {
             for (i, best) in bests.iter_mut().enumerate() {
-                let qi = &this.q_rows[(q0 + i) * d..(q0 + i + 1) * d];
+                let qi = &q_rows[(q0 + i) * d..(q0 + i + 1) * d];
                 for &p in &flat[offsets[i]..offsets[i + 1]] {
                     consider(this, qi, p as usize, best);
                 }
