@@ -72,7 +72,13 @@ pub(crate) struct MatchArgs {
     /// run).
     #[arg(long, value_name = "SCORE")]
     restart_below: Option<f64>,
-    /// Write C_BA (k x k, functions on B to functions on A) as text.
+    /// Keep the meshes' own units: no scaling to unit area before the
+    /// eigenbases (by default each shape is scaled to unit area, so that
+    /// the map does not depend on the units of either mesh).
+    #[arg(long)]
+    no_area_normalize: bool,
+    /// Write C_BA (k x k, functions on B to functions on A, between the
+    /// bases of the unit-area shapes unless --no-area-normalize) as text.
     #[arg(long)]
     save_fmap: Option<PathBuf>,
     /// Print one JSON object (stage times, map metrics, energy).
@@ -187,6 +193,7 @@ pub(crate) fn params_of(args: &MatchArgs) -> Result<MatchParams, Failure> {
         params.landmarks = read_landmarks(p)?;
     }
     params.adjoint = args.adjoint;
+    params.area_normalize = !args.no_area_normalize;
     params.refine = refinement(args)?;
     params.starts = match args.starts.as_deref().map(str::trim) {
         Some("none") => Vec::new(),
@@ -251,6 +258,8 @@ pub(crate) fn match_cmd(args: &MatchArgs) -> Result<(), Failure> {
             "source": args.source.display().to_string(),
             "target": args.target.display().to_string(),
             "n_source": a.n_vertices(), "n_target": b.n_vertices(), "k": args.k,
+            "area_normalized": params.area_normalize,
+            "input_areas": {"source": a.area(), "target": b.area()},
             "out": args.out.as_ref().map(|p| p.display().to_string()),
             "seconds": {"load": load_seconds, "spectra": r.times.spectra,
                 "descriptors": r.times.descriptors, "operators": r.times.operators,

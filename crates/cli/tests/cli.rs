@@ -570,3 +570,51 @@ fn render_subcommands_write_pictures_and_report_checked_numbers() {
     assert!(failure(&["error", "--source", &p("g.off")]).contains("--target"));
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// `fmaps match` gives the same map when the target is in other units
+/// (coordinates x1000), and `--json` says the shapes were normalized to
+/// unit area and what their areas were.
+#[test]
+fn match_does_not_depend_on_the_units() {
+    let dir = tmpdir("units");
+    let pair = fmaps::mesh_io::generate::creature_pair(3);
+    fmaps::mesh_io::write_mesh(dir.join("a.off"), &pair.source).unwrap();
+    fmaps::mesh_io::write_mesh(dir.join("b.off"), &pair.target).unwrap();
+    let big = pair.target.scaled(1000.0).unwrap();
+    fmaps::mesh_io::write_mesh(dir.join("b1000.off"), &big).unwrap();
+    let run = |target: &str, out: &str| -> serde_json::Value {
+        json_of(fmaps().current_dir(&dir).args([
+            "match",
+            "a.off",
+            target,
+            "--k",
+            "20",
+            "--k-process",
+            "50",
+            "--n-descr",
+            "30",
+            "--refine",
+            "zoomout",
+            "--zoomout",
+            "20:50:5",
+            "--starts",
+            "none",
+            "--threads",
+            "1",
+            "--json",
+            "--out",
+            out,
+        ]))
+    };
+    let (j1, j2) = (run("b.off", "m1.map"), run("b1000.off", "m2.map"));
+    let m1 = fmaps::mesh_io::read_map(dir.join("m1.map")).unwrap();
+    let m2 = fmaps::mesh_io::read_map(dir.join("m2.map")).unwrap();
+    assert_eq!(m1, m2);
+    assert_eq!(j2["area_normalized"], true);
+    let (a1, a2) = (
+        j1["input_areas"]["target"].as_f64().unwrap(),
+        j2["input_areas"]["target"].as_f64().unwrap(),
+    );
+    assert!((a2 / a1 - 1e6).abs() < 1e-6 * 1e6, "{a1} {a2}");
+    std::fs::remove_dir_all(&dir).ok();
+}

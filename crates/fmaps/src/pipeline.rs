@@ -192,6 +192,14 @@ pub struct MatchParams {
     /// ([`fmaps_solve::compress_descriptors`]); the energy is unchanged to
     /// rounding. On by default.
     pub compress: bool,
+    /// Scale each shape to unit area before anything else (on by
+    /// default): the eigenvalues, the descriptors' energies, the Laplacian
+    /// mask and every refiner then see the same numbers whatever the
+    /// mesh's units (millimetres, metres), and the two shapes of a pair
+    /// may come in different units. `C_BA` is then between the bases of
+    /// the unit-area shapes. Off: the shapes as given (only for shapes
+    /// known to share units and a comparable size).
+    pub area_normalize: bool,
     /// Multi-start: further sizes of the initial map. The pipeline is run
     /// once per size (`k` first, then the others in parallel; a ZoomOut starts from the
     /// smaller of the size and its `k_start`), and the final map whose
@@ -230,6 +238,7 @@ impl Default for MatchParams {
             spectrum: SpectrumParams::default(),
             compress: true,
             refine: Refinement::None,
+            area_normalize: true,
             starts: Vec::new(),
             restart_below: None,
         }
@@ -298,22 +307,46 @@ impl MatchParams {
 /// One shape after the per-shape stages: reusable across pairs.
 #[derive(Debug, Clone)]
 pub struct PreparedShape {
-    /// Vertex positions (for sub-sampled refinement).
+    /// Vertex positions (for sub-sampled refinement and the orientation
+    /// score), after the area normalization when it is on.
     pub vertices: Vec<[f64; 3]>,
     /// Oriented triangles (for the orientation operators).
     pub faces: Vec<[usize; 3]>,
-    /// The eigenbasis (`k_process` pairs).
+    /// The eigenbasis (`k_process` pairs) of the (normalized) shape.
     pub basis: SpectralBasis,
-    /// Total area (sum of the lumped mass).
+    /// Total area of the (normalized) shape: the sum of the lumped mass,
+    /// 1 to rounding with [`MatchParams::area_normalize`].
     pub area: f64,
+    /// The input mesh's area, in its own units squared.
+    pub input_area: f64,
+    /// The factor every coordinate was multiplied by (`1/√input_area`
+    /// with the area normalization, else 1).
+    pub scale: f64,
     /// Seconds for the Laplacian and the eigenbasis.
     pub seconds: f64,
 }
 
-/// Laplacian and eigenbasis of one shape.
+/// Laplacian and eigenbasis of one shape, after scaling it to unit area
+/// when [`MatchParams::area_normalize`] is on (the default), so that
+/// nothing downstream depends on the mesh's units.
 pub fn prepare(mesh: &TriMesh, params: &MatchParams) -> Result<PreparedShape, MatchError> {
     params.check()?;
     let t = Instant::now();
+    let input_area = mesh.area();
+    let bad =
+        |e: fmaps_mesh_io::Error| MatchError::InvalidParameter(format!("area normalization: {e}"));
+    let (normalized, scale) = if params.area_normalize {
+        if !(input_area.is_finite() && input_area > 0.0) {
+            return Err(MatchError::InvalidParameter(format!(
+                "the shape's area is {input_area}: it cannot be normalized (degenerate faces only?)"
+            )));
+        }
+        let scale = 1.0 / input_area.sqrt();
+        (Some(mesh.scaled(scale).map_err(bad)?), scale)
+    } else {
+        (None, 1.0)
+    };
+    let mesh = normalized.as_ref().unwrap_or(mesh);
     let out = spectrum(mesh, params.k_process, &params.spectrum).map_err(|source| {
         MatchError::Spectrum {
             shape: "input",
@@ -326,6 +359,8 @@ pub fn prepare(mesh: &TriMesh, params: &MatchParams) -> Result<PreparedShape, Ma
         faces: mesh.faces().to_vec(),
         basis: out.basis,
         area,
+        input_area,
+        scale,
         seconds: t.elapsed().as_secs_f64(),
     })
 }

@@ -33,6 +33,9 @@ impl fmt::Display for Location {
 #[derive(Debug, thiserror::Error)]
 #[non_exhaustive]
 pub enum Error {
+    /// A scale factor that is not finite and positive.
+    #[error("scale factor {0} must be finite and positive")]
+    InvalidScale(f64),
     /// The file could not be opened, read or written.
     #[error("{}: input/output error", path.display())]
     Io {

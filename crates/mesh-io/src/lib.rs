@@ -158,6 +158,21 @@ impl TriMesh {
         self.face_areas().iter().sum()
     }
 
+    /// The mesh with every coordinate multiplied by `factor` (same faces).
+    /// Errors when `factor` is not finite and positive or a coordinate
+    /// leaves the finite range.
+    pub fn scaled(&self, factor: f64) -> Result<TriMesh> {
+        if !(factor.is_finite() && factor > 0.0) {
+            return Err(Error::InvalidScale(factor));
+        }
+        let v = self
+            .vertices
+            .iter()
+            .map(|p| p.map(|c| c * factor))
+            .collect();
+        TriMesh::new(v, self.faces.clone())
+    }
+
     /// Checks the mesh and returns a report of its combinatorics and defects.
     pub fn validate(&self) -> MeshReport {
         validate::report(self)
