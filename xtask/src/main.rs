@@ -12,6 +12,8 @@
 //! - `cargo xtask geodesic-check`: exact geodesics against tvb-gdist (largest
 //!   relative difference, time per source).
 
+#![forbid(unsafe_code)]
+
 mod bench;
 mod bench_match;
 mod bench_refine;
@@ -58,6 +60,14 @@ enum Command {
     Test(test::Args),
     /// crates.io readiness of every crate: metadata, licences, docs, `cargo publish --dry-run` in dependency order.
     PublishCheck(publish_check::Args),
+    /// (Internal) runs a program and records its peak memory, for the
+    /// benchmarks: `measure-child PEAK_FILE PROGRAM ARGS...`.
+    #[command(hide = true)]
+    MeasureChild {
+        /// PEAK_FILE PROGRAM ARGS...
+        #[arg(trailing_var_arg = true, allow_hyphen_values = true)]
+        args: Vec<std::ffi::OsString>,
+    },
 }
 
 fn main() -> anyhow::Result<()> {
@@ -71,6 +81,7 @@ fn main() -> anyhow::Result<()> {
         Command::Pictures(a) => pictures::pictures(&a),
         Command::PublishCheck(a) => publish_check::publish_check(&a),
         Command::Test(a) => test::test(&a),
+        Command::MeasureChild { args } => std::process::exit(util::measure_child(&args)?),
         Command::BenchMatch(a) => bench_match::bench_match(&a),
         Command::BenchRefine(a) => bench_refine::bench_refine(&a),
     }

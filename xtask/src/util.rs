@@ -1,6 +1,5 @@
 //! Paths, the Python peer, and running a child process with its peak memory.
 
-use std::io::Read;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 
@@ -134,35 +133,70 @@ pub struct Run {
 }
 
 /// Runs a command to completion, capturing stdout; fails with its stderr
-/// when it exits non-zero. Peak memory comes from `wait4`'s rusage, so it
-/// is the child's own, whatever ran before.
+/// when it exits non-zero. The command runs under this xtask's hidden
+/// `measure-child` subcommand, whose only child it is, so the peak memory
+/// that `getrusage(RUSAGE_CHILDREN)` reports there is the command's own,
+/// whatever ran before (no `unsafe` here: see [`measure_child`]).
 pub fn run(cmd: &mut Command) -> anyhow::Result<Run> {
     let desc = format!("{cmd:?}");
-    let mut child = cmd
+    let peak_file = std::env::temp_dir().join(format!(
+        "fmaps-xtask-peak-{}-{}",
+        std::process::id(),
+        RUNS.fetch_add(1, std::sync::atomic::Ordering::Relaxed)
+    ));
+    let mut wrapped = Command::new(std::env::current_exe()?);
+    wrapped
+        .arg("measure-child")
+        .arg(&peak_file)
+        .arg(cmd.get_program())
+        .args(cmd.get_args());
+    if let Some(dir) = cmd.get_current_dir() {
+        wrapped.current_dir(dir);
+    }
+    for (k, v) in cmd.get_envs() {
+        match v {
+            Some(v) => wrapped.env(k, v),
+            None => wrapped.env_remove(k),
+        };
+    }
+    let out = wrapped
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
-        .spawn()
+        .output()
         .with_context(|| format!("starting {desc}"))?;
-    let mut stdout = String::new();
-    let mut stderr = String::new();
-    child.stdout.take().unwrap().read_to_string(&mut stdout)?;
-    child.stderr.take().unwrap().read_to_string(&mut stderr)?;
-    let pid = child.id() as libc::pid_t;
-    let mut status = 0;
-    // SAFETY: plain FFI call with valid out-pointers; the child is ours and
-    // has not been waited for.
-    let mut usage: libc::rusage = unsafe { std::mem::zeroed() };
-    let r = unsafe { libc::wait4(pid, &mut status, 0, &mut usage) };
-    if r != pid {
-        bail!("wait4 failed for {desc}");
+    let peak = std::fs::read_to_string(&peak_file).ok();
+    std::fs::remove_file(&peak_file).ok();
+    if !out.status.success() {
+        bail!("{desc} failed:\n{}", String::from_utf8_lossy(&out.stderr));
     }
-    if !(libc::WIFEXITED(status) && libc::WEXITSTATUS(status) == 0) {
-        bail!("{desc} failed:\n{stderr}");
-    }
+    let peak_kb: f64 = peak
+        .as_deref()
+        .and_then(|p| p.trim().parse().ok())
+        .with_context(|| format!("no peak memory recorded for {desc}"))?;
     Ok(Run {
-        stdout,
-        peak_mb: usage.ru_maxrss as f64 / 1024.0,
+        stdout: String::from_utf8_lossy(&out.stdout).into_owned(),
+        peak_mb: peak_kb / 1024.0,
     })
+}
+
+/// Distinguishes the peak-memory files of the runs of one xtask.
+static RUNS: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
+
+/// `xtask measure-child PEAK_FILE PROGRAM ARGS...`: runs the program with
+/// this process's standard streams, writes its peak resident memory (KB,
+/// `getrusage(RUSAGE_CHILDREN)`: this process has no other child) to
+/// PEAK_FILE, and exits with its status.
+pub fn measure_child(args: &[std::ffi::OsString]) -> anyhow::Result<i32> {
+    let [peak_file, program, rest @ ..] = args else {
+        bail!("measure-child: expected PEAK_FILE PROGRAM [ARGS...]");
+    };
+    let status = Command::new(program)
+        .args(rest)
+        .status()
+        .with_context(|| format!("starting {}", program.to_string_lossy()))?;
+    let usage = nix::sys::resource::getrusage(nix::sys::resource::UsageWho::RUSAGE_CHILDREN)?;
+    std::fs::write(peak_file, usage.max_rss().to_string())?;
+    Ok(status.code().unwrap_or(1))
 }
 
 /// Parses a little-endian float64 `.npy` (C or Fortran order): shape and
