@@ -76,7 +76,7 @@ pub use cpu::{CpuFeatures, cpu_features};
 pub use wedge::{Fan, wedge_sums};
 
 /// Errors of this crate.
-#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
 #[non_exhaustive]
 pub enum Error {
     /// Data and query rows have different lengths.
@@ -101,6 +101,43 @@ pub enum Error {
         /// Queries.
         queries: usize,
     },
+    /// A coordinate is NaN or infinite (no nearest row is defined).
+    #[error("{side} row {row}, coordinate {col} is {value}: coordinates must be finite")]
+    NonFinite {
+        /// "data" or "query".
+        side: &'static str,
+        /// The row.
+        row: usize,
+        /// The coordinate.
+        col: usize,
+        /// Its value.
+        value: f64,
+    },
+}
+
+/// The first non-finite entry of `m` (column by column), as an error of
+/// `side`. A sum per column catches NaN and infinities cheaply; only a
+/// column whose sum is not finite (or overflowed) is scanned entry by
+/// entry.
+fn check_finite(m: MatRef<'_, f64>, side: &'static str) -> Result<()> {
+    for j in 0..m.ncols() {
+        let col = m.col(j);
+        let sum: f64 = match col.try_as_col_major() {
+            Some(c) => c.as_slice().iter().sum(),
+            None => (0..m.nrows()).map(|i| col[i]).sum(),
+        };
+        if !sum.is_finite()
+            && let Some(i) = (0..m.nrows()).find(|&i| !col[i].is_finite())
+        {
+            return Err(Error::NonFinite {
+                side,
+                row: i,
+                col: j,
+                value: col[i],
+            });
+        }
+    }
+    Ok(())
 }
 
 /// Result alias of this crate.
@@ -191,7 +228,8 @@ pub(crate) fn prefix_width(d: usize) -> usize {
 /// layouts and strategies copy first (`O(n d)`, small next to the search).
 ///
 /// Errors: rows of different lengths, a hint count other than one per
-/// query, queries without data rows.
+/// query, queries without data rows, a coordinate that is not finite.
+/// Rows of no coordinates are all at distance 0: every query gets row 0.
 pub fn nearest_rows(
     data: MatRef<'_, f64>,
     queries: MatRef<'_, f64>,
@@ -201,6 +239,12 @@ pub fn nearest_rows(
     let (nx, d) = (data.nrows(), data.ncols());
     if check_input(nx, d, queries, hint)? {
         return Ok(Vec::new());
+    }
+    check_finite(data, "data")?;
+    check_finite(queries, "query")?;
+    if d == 0 {
+        // Every row is at distance 0: ties go to the smallest index.
+        return Ok(vec![0; queries.nrows()]);
     }
     let mut strategy = resolve(params.strategy, nx, queries.nrows(), d, hint.is_some());
     if strategy == NnStrategy::Tiles {
@@ -257,7 +301,7 @@ fn check_input(
 /// use fmaps_nn::{NnParams, Searcher, nearest_rows};
 ///
 /// let data = Mat::from_fn(500, 20, |i, j| ((i * 7 + j * 3) % 101) as f64);
-/// let searcher = Searcher::new(data.as_ref(), &NnParams::default());
+/// let searcher = Searcher::new(data.as_ref(), &NnParams::default())?;
 /// for shift in [0.25, 0.5] {
 ///     let queries = Mat::from_fn(50, 20, |i, j| ((i * 13 + j) % 97) as f64 + shift);
 ///     let once = nearest_rows(data.as_ref(), queries.as_ref(), None, &NnParams::default())?;
@@ -280,10 +324,12 @@ pub struct Searcher {
 
 impl Searcher {
     /// A searcher of the rows of `data` (n x d, any layout; copied).
-    pub fn new(data: MatRef<'_, f64>, params: &NnParams) -> Searcher {
+    /// Errors: a non-finite coordinate.
+    pub fn new(data: MatRef<'_, f64>, params: &NnParams) -> Result<Searcher> {
+        check_finite(data, "data")?;
         let data = owned(data);
         let max = max_abs(&data);
-        Searcher {
+        Ok(Searcher {
             scale: scale_for(max),
             max,
             data,
@@ -291,7 +337,7 @@ impl Searcher {
             brute: OnceLock::new(),
             tree: OnceLock::new(),
             prefix: OnceLock::new(),
-        }
+        })
     }
 
     /// Data rows n.
@@ -310,6 +356,10 @@ impl Searcher {
         let (nx, d) = self.data.shape();
         if check_input(nx, d, queries, hint)? {
             return Ok(Vec::new());
+        }
+        check_finite(queries, "query")?;
+        if d == 0 {
+            return Ok(vec![0; queries.nrows()]);
         }
         let nq = queries.nrows();
         let mut strategy = resolve(self.params.strategy, nx, nq, d, hint.is_some());

@@ -266,7 +266,7 @@ fn a_searcher_answers_every_query_set_like_the_one_off_search() {
             NnStrategy::Prefix,
             NnStrategy::Tiles,
         ] {
-            let searcher = Searcher::new(view(&x), &NnParams::with_strategy(strategy));
+            let searcher = Searcher::new(view(&x), &NnParams::with_strategy(strategy)).unwrap();
             assert_eq!((searcher.n(), searcher.dim()), (720, 70));
             for (round, (q, want)) in rounds.iter().enumerate() {
                 let guess: Vec<usize> = want.iter().map(|&t| (t + round) % 720).collect();
@@ -282,4 +282,72 @@ fn a_searcher_answers_every_query_set_like_the_one_off_search() {
             assert!(searcher.search(view(&DMatrix::zeros(3, 5)), None).is_err());
         }
     }
+}
+
+/// Bad input is an error naming the row, never an out-of-range index.
+#[test]
+fn bad_input_is_an_error() {
+    use fmaps_nn::{Error, NnParams, Searcher, nearest_rows, view};
+    let p = NnParams::default();
+    let x = DMatrix::from_fn(40, 6, |i, j| (i * 3 + j) as f64);
+    let mut q = DMatrix::from_fn(10, 6, |i, j| (i + j) as f64);
+    assert_eq!(
+        nearest_rows(view(&x), view(&DMatrix::zeros(0, 6)), None, &p).unwrap(),
+        Vec::<usize>::new()
+    );
+    assert_eq!(
+        nearest_rows(view(&DMatrix::zeros(0, 6)), view(&q), None, &p).unwrap_err(),
+        Error::NoData { queries: 10 }
+    );
+    assert!(matches!(
+        nearest_rows(view(&x), view(&DMatrix::zeros(3, 5)), None, &p),
+        Err(Error::DimensionMismatch {
+            data: 6,
+            queries: 5
+        })
+    ));
+    assert!(matches!(
+        nearest_rows(view(&x), view(&q), Some(&[0, 1]), &p),
+        Err(Error::HintCount {
+            found: 2,
+            expected: 10
+        })
+    ));
+    q[(7, 4)] = f64::NAN;
+    assert!(matches!(
+        nearest_rows(view(&x), view(&q), None, &p),
+        Err(Error::NonFinite {
+            side: "query",
+            row: 7,
+            col: 4,
+            ..
+        })
+    ));
+    let mut bad = x.clone();
+    bad[(12, 1)] = f64::INFINITY;
+    assert!(matches!(
+        nearest_rows(view(&bad), view(&x), None, &p),
+        Err(Error::NonFinite {
+            side: "data",
+            row: 12,
+            col: 1,
+            ..
+        })
+    ));
+    assert!(matches!(
+        Searcher::new(view(&bad), &p),
+        Err(Error::NonFinite { row: 12, .. })
+    ));
+    // Huge finite values whose column sums overflow are not an error.
+    let big = DMatrix::from_fn(4, 2, |i, _| 1e308 * (1.0 - i as f64 * 0.1));
+    assert_eq!(
+        nearest_rows(view(&big), view(&big), None, &p).unwrap(),
+        vec![0, 1, 2, 3]
+    );
+    // No coordinates: every row at distance 0, the smallest index wins.
+    let empty = DMatrix::<f64>::zeros(5, 0);
+    assert_eq!(
+        nearest_rows(view(&empty), view(&DMatrix::zeros(3, 0)), None, &p).unwrap(),
+        vec![0; 3]
+    );
 }
