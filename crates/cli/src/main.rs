@@ -261,8 +261,21 @@ fn runtime<E: Into<anyhow::Error>>(e: E) -> Failure {
     Failure(1, e.into())
 }
 
+/// More threads than this many per core only cost start-up time (a
+/// hundred thousand threads took a minute before anything ran).
+const THREADS_PER_CORE: usize = 4;
+
 fn main() -> ExitCode {
     let cli = Cli::parse();
+    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+    if cli.threads > THREADS_PER_CORE * cores {
+        eprintln!(
+            "error: --threads {}: at most {} on this machine ({THREADS_PER_CORE} per core, {cores} cores; 0 = all cores)",
+            cli.threads,
+            THREADS_PER_CORE * cores
+        );
+        return ExitCode::from(2);
+    }
     if let Err(e) = rayon::ThreadPoolBuilder::new()
         .num_threads(cli.threads)
         .build_global()

@@ -618,3 +618,68 @@ fn match_does_not_depend_on_the_units() {
     assert!((a2 / a1 - 1e6).abs() < 1e-6 * 1e6, "{a1} {a2}");
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// Sizes a user can type are bounded by what the input makes sensible,
+/// with exit code 2 and a reason, never a panic or a runaway allocation
+/// (issue 19, items 3-5): descriptor samples beyond 4 x the eigenpairs
+/// they come from, descriptor matrices beyond 2 GB (landmarks), threads
+/// beyond 4 per core; a ZoomOut step that would overflow just ends the
+/// schedule.
+#[test]
+fn typed_sizes_are_bounded() {
+    let dir = tmpdir("bounds");
+    let pair = fmaps::mesh_io::generate::creature_pair(2);
+    fmaps::mesh_io::write_mesh(dir.join("a.off"), &pair.source).unwrap();
+    fmaps::mesh_io::write_mesh(dir.join("b.off"), &pair.target).unwrap();
+    let n = pair.source.n_vertices();
+    // 20000 landmark lines: 1 + 20000 descriptor families.
+    let lines: String = (0..20000)
+        .map(|i| format!("{} {}\n", i % n + 1, i % n + 1))
+        .collect();
+    std::fs::write(dir.join("lm.txt"), lines).unwrap();
+    let m = [
+        "match",
+        "a.off",
+        "b.off",
+        "--k",
+        "10",
+        "--k-process",
+        "20",
+        "--threads",
+        "1",
+    ];
+    let run = |extra: &[&str]| {
+        let out = fmaps()
+            .current_dir(&dir)
+            .args(m)
+            .args(extra)
+            .output()
+            .unwrap();
+        (
+            out.status.code(),
+            String::from_utf8_lossy(&out.stderr).into_owned(),
+        )
+    };
+    for (extra, needle) in [
+        (vec!["--n-descr", "18446744073709551615"], "only repeat"),
+        (vec!["--n-descr", "100000"], "only repeat"),
+        (vec!["--n-descr", "50", "--landmarks", "lm.txt"], "GB"),
+    ] {
+        let (code, err) = run(&extra);
+        assert_eq!(code, Some(2), "{extra:?}: {err}");
+        assert!(
+            err.contains(needle) && !err.contains("panicked"),
+            "{extra:?}: {err}"
+        );
+    }
+    let (code, err) = run(&["--n-descr", "10", "--zoomout", "10:30:18446744073709551615"]);
+    assert_eq!(code, Some(0), "{err}");
+    let out = fmaps()
+        .args(["--threads", "100000", "info"])
+        .arg(dir.join("a.off"))
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("per core"));
+    std::fs::remove_dir_all(&dir).ok();
+}

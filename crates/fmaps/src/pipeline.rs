@@ -279,6 +279,14 @@ impl MatchParams {
         if self.n_descr == 0 || self.subsample == 0 {
             return bad("n_descr and subsample must be positive".into());
         }
+        // WKS and HKS samples are combinations of the k_descr functions
+        // φ_i²: far more samples than that only repeat them.
+        if self.n_descr > MAX_DESCR_PER_EIGENPAIR.saturating_mul(self.k_descr) {
+            return bad(format!(
+                "n_descr = {} is more than {MAX_DESCR_PER_EIGENPAIR} x k_descr ({}): the descriptors are combinations of the {} functions φ_i², more samples only repeat them",
+                self.n_descr, self.k_descr, self.k_descr
+            ));
+        }
         if let Refinement::ZoomOut { zoomout, .. } = &self.refine
             && zoomout.subsample.is_some()
         {
@@ -303,6 +311,12 @@ impl MatchParams {
         Ok(())
     }
 }
+
+/// Descriptor samples allowed per eigenpair they are built from.
+pub const MAX_DESCR_PER_EIGENPAIR: usize = 4;
+
+/// Memory the descriptor matrices of one shape may take (2 GiB).
+pub const MAX_DESCRIPTOR_BYTES: usize = 1 << 31;
 
 /// One shape after the per-shape stages: reusable across pairs.
 #[derive(Debug, Clone)]
@@ -519,6 +533,24 @@ pub fn match_prepared(
                 b.basis.n()
             )));
         }
+    }
+    // The descriptor matrices (n x columns) of the larger shape, and the
+    // columns x columns Gram matrix of their compression, must fit.
+    let columns = params.n_descr.saturating_mul(1 + params.landmarks.len()) / params.subsample;
+    let bytes = columns
+        .saturating_mul(a.basis.n().max(b.basis.n()).max(columns))
+        .saturating_mul(8);
+    if bytes > MAX_DESCRIPTOR_BYTES {
+        return Err(MatchError::InvalidParameter(format!(
+            "{} descriptors ({} samples x (1 + {} landmarks) / subsample {}) on {} vertices need {:.1} GB (with their Gram matrix), more than {} GB: use fewer landmarks or samples",
+            columns,
+            params.n_descr,
+            params.landmarks.len(),
+            params.subsample,
+            a.basis.n().max(b.basis.n()),
+            bytes as f64 / 1e9,
+            MAX_DESCRIPTOR_BYTES as f64 / 1e9
+        )));
     }
     let mut times = MatchTimes::default();
     let t = Instant::now();
