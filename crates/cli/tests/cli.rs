@@ -264,6 +264,26 @@ fn eval_of_an_identity_and_a_shifted_map() {
         .unwrap();
     assert_eq!(out.status.code(), Some(2));
     assert!(String::from_utf8(out.stderr).unwrap().contains("3 lines"));
+    // Empty ground truth: nothing to measure, an input error (was a
+    // perfect score, exit 0).
+    std::fs::write(dir.join("empty.vts"), "").unwrap();
+    let out = fmaps()
+        .args(["eval", "--source", &p("g.off"), "--target", &p("g.off")])
+        .args(["--map", &p("id.map")])
+        .args([
+            "--gt-source",
+            &p("empty.vts"),
+            "--gt-target",
+            &p("empty.vts"),
+        ])
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    assert!(
+        String::from_utf8(out.stderr)
+            .unwrap()
+            .contains("ground truth is empty")
+    );
     std::fs::remove_dir_all(&dir).unwrap();
 }
 

@@ -74,6 +74,9 @@ pub enum Error {
         /// The size.
         size: usize,
     },
+    /// The ground truth has no point: there is nothing to measure.
+    #[error("the ground truth is empty: no point to measure the map at")]
+    EmptyGroundTruth,
     /// A dataset file or directory is missing or malformed.
     #[error("{0}")]
     Dataset(String),
@@ -107,6 +110,9 @@ impl GroundTruth {
         target: Vec<usize>,
         target_sym: Option<Vec<usize>>,
     ) -> Result<Self> {
+        if source.is_empty() {
+            return Err(Error::EmptyGroundTruth);
+        }
         if source.len() != target.len() {
             return Err(Error::SizeMismatch {
                 what: "ground truth target list".into(),

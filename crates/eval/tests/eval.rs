@@ -106,6 +106,11 @@ fn bad_sizes_and_indices_are_errors() {
         GroundTruth::new(vec![0, 1], vec![0], None),
         Err(Error::SizeMismatch { .. })
     ));
+    // An empty ground truth measures nothing: an error, not a perfect score.
+    assert!(matches!(
+        GroundTruth::new(Vec::new(), Vec::new(), None),
+        Err(Error::EmptyGroundTruth)
+    ));
     let gt = GroundTruth::new(vec![0, 1], vec![0, 1], None).unwrap();
     let mut bad = id.clone();
     bad[3] = 45;
