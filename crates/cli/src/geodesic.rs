@@ -9,6 +9,9 @@ pub(crate) fn geodesic(
     out: Option<&Path>,
     json: bool,
 ) -> Result<(), Failure> {
+    if let Some(out) = out {
+        crate::outputs::check_outputs(&[path], &[out])?;
+    }
     let mesh = load(path)?;
     let t = Instant::now();
     let solver = distance_solver(&mesh, method)?;
@@ -19,7 +22,7 @@ pub(crate) fn geodesic(
         for x in &d {
             outln!(text, "{x:.17e}");
         }
-        std::fs::write(out, text)
+        mesh_io::atomic::write_atomically(out, |w| w.write_all(text.as_bytes()))
             .with_context(|| format!("writing {}", out.display()))
             .map_err(runtime)?;
     }

@@ -17,6 +17,7 @@ mod eval;
 mod geodesic;
 mod info;
 mod match_cmd;
+mod outputs;
 mod render_cmd;
 mod spectrum;
 

@@ -227,6 +227,12 @@ pub(crate) fn params_of(args: &MatchArgs) -> Result<MatchParams, Failure> {
 
 pub(crate) fn match_cmd(args: &MatchArgs) -> Result<(), Failure> {
     use fmaps::pipeline::{MatchError, match_shapes_with_progress};
+    let outs: Vec<&Path> = [&args.out, &args.save_fmap]
+        .into_iter()
+        .flatten()
+        .map(PathBuf::as_path)
+        .collect();
+    crate::outputs::check_outputs(&[&args.source, &args.target], &outs)?;
     let t = Instant::now();
     let a = load(&args.source)?;
     let b = load(&args.target)?;
@@ -240,8 +246,9 @@ pub(crate) fn match_cmd(args: &MatchArgs) -> Result<(), Failure> {
         },
     )?;
     drop(spinner);
+    let mut staged = crate::outputs::Staged::default();
     if let Some(out) = &args.out {
-        mesh_io::write_map(out, &r.t_ab).map_err(runtime)?;
+        staged.stage(out, |tmp| Ok(mesh_io::write_map(tmp, &r.t_ab)?))?;
     }
     if let Some(path) = &args.save_fmap {
         let mut text = String::new();
@@ -249,9 +256,9 @@ pub(crate) fn match_cmd(args: &MatchArgs) -> Result<(), Failure> {
             let cells: Vec<String> = row.iter().map(|v| format!("{v:.17e}")).collect();
             outln!(text, "{}", cells.join(" "));
         }
-        std::fs::write(path, text)
-            .map_err(|e| runtime(anyhow::anyhow!("{}: {e}", path.display())))?;
+        staged.stage(path, |tmp| Ok(std::fs::write(tmp, text)?))?;
     }
+    staged.commit()?;
     let total = t.elapsed().as_secs_f64();
     if args.json {
         let v = json!({

@@ -13,6 +13,11 @@ pub(crate) fn spectrum(
     json: bool,
     out: Option<&Path>,
 ) -> Result<(), Failure> {
+    let files = out.map(basis_files);
+    if let Some(f) = &files {
+        let outs: Vec<&Path> = f.iter().map(PathBuf::as_path).collect();
+        crate::outputs::check_outputs(&path.into_iter().collect::<Vec<_>>(), &outs)?;
+    }
     let t = Instant::now();
     let (name, mesh) = match (path, builtin) {
         (Some(p), _) => (p.display().to_string(), load(p)?),
@@ -46,10 +51,8 @@ pub(crate) fn spectrum(
         _ => runtime(e),
     })?;
     let b = &s.basis;
-    if let Some(out) = out {
-        write_basis(out, b)
-            .with_context(|| format!("writing {}", out.display()))
-            .map_err(runtime)?;
+    if let Some(files) = &files {
+        write_basis(files, b)?;
     }
     let peak = peak_rss_mb();
     let exact: Option<Vec<f64>> = matches!(builtin, Some(Builtin::Sphere)).then(|| {
@@ -145,13 +148,26 @@ pub(crate) fn spectrum(
 }
 
 /// FILE.npy: eigenvectors; FILE_eigenvalues.npy; FILE_mass.npy.
-pub(crate) fn write_basis(out: &Path, b: &fmaps::eigensolve::SpectralBasis) -> anyhow::Result<()> {
+/// The three files of `--out FILE.npy`: FILE.npy (eigenvectors),
+/// FILE_eigenvalues.npy, FILE_mass.npy.
+fn basis_files(out: &Path) -> [PathBuf; 3] {
     let stem = out.with_extension("");
     let sibling = |suffix: &str| PathBuf::from(format!("{}_{suffix}.npy", stem.display()));
-    fmaps::npy::save_f64(out, &[b.n(), b.k()], b.eigenvectors.as_slice())?;
-    fmaps::npy::save_f64(&sibling("eigenvalues"), &[b.k()], b.eigenvalues.as_slice())?;
-    fmaps::npy::save_f64(&sibling("mass"), &[b.n()], b.mass.as_slice())?;
-    Ok(())
+    [out.to_path_buf(), sibling("eigenvalues"), sibling("mass")]
+}
+
+/// The basis as three `.npy` files ([`basis_files`]), written together.
+fn write_basis(files: &[PathBuf; 3], b: &fmaps::eigensolve::SpectralBasis) -> Result<(), Failure> {
+    let mut staged = crate::outputs::Staged::default();
+    let arrays: [(&[usize], &[f64]); 3] = [
+        (&[b.n(), b.k()], b.eigenvectors.as_slice()),
+        (&[b.k()], b.eigenvalues.as_slice()),
+        (&[b.n()], b.mass.as_slice()),
+    ];
+    for (path, (shape, data)) in files.iter().zip(arrays) {
+        staged.stage(path, |tmp| Ok(fmaps::npy::save_f64(tmp, shape, data)?))?;
+    }
+    staged.commit()
 }
 
 /// Peak resident memory of this process (Linux), in MB.

@@ -703,3 +703,81 @@ fn typed_sizes_are_bounded() {
     assert!(String::from_utf8_lossy(&out.stderr).contains("per core"));
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// Outputs never overwrite an input or each other, and a command that
+/// fails leaves every previous output as it was, with no temporary file
+/// behind (issue 19, item 6).
+#[test]
+fn outputs_are_atomic_and_never_clobber_inputs() {
+    let dir = tmpdir("atomic");
+    let pair = fmaps::mesh_io::generate::creature_pair(2);
+    fmaps::mesh_io::write_mesh(dir.join("a.off"), &pair.source).unwrap();
+    fmaps::mesh_io::write_mesh(dir.join("b.off"), &pair.target).unwrap();
+    let a_before = std::fs::read(dir.join("a.off")).unwrap();
+    std::fs::write(dir.join("keep.map"), "old content\n").unwrap();
+    let m = [
+        "match",
+        "a.off",
+        "b.off",
+        "--k",
+        "10",
+        "--k-process",
+        "20",
+        "--n-descr",
+        "10",
+    ];
+    let run = |extra: &[&str]| {
+        let out = fmaps()
+            .current_dir(&dir)
+            .args(m)
+            .args(extra)
+            .output()
+            .unwrap();
+        (
+            out.status.code(),
+            String::from_utf8_lossy(&out.stderr).into_owned(),
+        )
+    };
+    let (code, err) = run(&["--out", "a.off"]);
+    assert_eq!(code, Some(2), "{err}");
+    assert!(err.contains("overwrite the input"), "{err}");
+    let (code, err) = run(&["--out", "x.map", "--save-fmap", "./x.map"]);
+    assert_eq!(code, Some(2), "{err}");
+    assert!(err.contains("two outputs"), "{err}");
+    // The second output cannot be written: the first stays as it was.
+    let (code, err) = run(&["--out", "keep.map", "--save-fmap", "no/such/dir/C.txt"]);
+    assert_eq!(code, Some(1), "{err}");
+    assert_eq!(
+        std::fs::read_to_string(dir.join("keep.map")).unwrap(),
+        "old content\n"
+    );
+    assert_eq!(std::fs::read(dir.join("a.off")).unwrap(), a_before);
+    let mut names: Vec<String> = std::fs::read_dir(&dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    names.sort();
+    assert_eq!(
+        names,
+        ["a.off", "b.off", "keep.map"],
+        "temporaries left behind"
+    );
+    // Both written when both can be.
+    let (code, err) = run(&["--out", "keep.map", "--save-fmap", "C.txt"]);
+    assert_eq!(code, Some(0), "{err}");
+    assert_ne!(
+        std::fs::read_to_string(dir.join("keep.map")).unwrap(),
+        "old content\n"
+    );
+    assert!(dir.join("C.txt").exists());
+    // geodesic and spectrum refuse to overwrite their input too.
+    for args in [
+        vec!["geodesic", "a.off", "--source", "0", "--out", "a.off"],
+        vec!["spectrum", "a.off", "--k", "5", "--out", "a.off"],
+    ] {
+        let out = fmaps().current_dir(&dir).args(&args).output().unwrap();
+        assert_eq!(out.status.code(), Some(2), "{args:?}");
+    }
+    assert_eq!(std::fs::read(dir.join("a.off")).unwrap(), a_before);
+    std::fs::remove_dir_all(&dir).ok();
+}

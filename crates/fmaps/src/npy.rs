@@ -45,10 +45,9 @@ pub fn write_f64<W: Write>(w: &mut W, shape: &[usize], data: &[f64]) -> io::Resu
 }
 
 /// Writes an `f64` array to a file (see [`write_f64`]).
+/// Written whole or not at all ([`fmaps_mesh_io::atomic`]).
 pub fn save_f64(path: &Path, shape: &[usize], data: &[f64]) -> io::Result<()> {
-    let mut f = io::BufWriter::new(std::fs::File::create(path)?);
-    write_f64(&mut f, shape, data)?;
-    f.flush()
+    fmaps_mesh_io::atomic::write_atomically(path, |mut w| write_f64(&mut w, shape, data))
 }
 
 #[cfg(test)]

@@ -86,9 +86,7 @@ pub fn write_index_list<W: Write>(w: &mut W, indices: &[usize]) -> io::Result<()
 }
 
 fn write_list(path: &Path, indices: &[usize]) -> Result<()> {
-    let mut f = io::BufWriter::new(fs::File::create(path).map_err(|e| Error::io(path, e))?);
-    write_index_list(&mut f, indices)
-        .and_then(|()| f.flush())
+    crate::atomic::write_atomically(path, |mut w| write_index_list(&mut w, indices))
         .map_err(|e| Error::io(path, e))
 }
 

@@ -45,6 +45,7 @@
 #![deny(missing_docs)]
 #![forbid(unsafe_code)]
 
+pub mod atomic;
 mod corres;
 mod creature;
 mod error;
@@ -55,7 +56,6 @@ mod ply;
 mod validate;
 
 use std::fs;
-use std::io::{BufWriter, Write};
 use std::path::Path;
 
 pub use corres::{
@@ -282,16 +282,12 @@ pub fn read_mesh(path: impl AsRef<Path>) -> Result<TriMesh> {
 pub fn write_mesh(path: impl AsRef<Path>, mesh: &TriMesh) -> Result<()> {
     let path = path.as_ref();
     let format = Format::from_path(path)?;
-    let file = fs::File::create(path).map_err(|e| Error::io(path, e))?;
-    let mut w = BufWriter::new(file);
-    let result = match format {
+    atomic::write_atomically(path, |mut w| match format {
         Format::Off => write_off(&mut w, mesh),
         Format::Obj => write_obj(&mut w, mesh),
         Format::Ply => write_ply(&mut w, mesh),
-    };
-    result
-        .and_then(|()| w.flush())
-        .map_err(|e| Error::io(path, e))
+    })
+    .map_err(|e| Error::io(path, e))
 }
 
 pub(crate) fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {

@@ -142,9 +142,11 @@ impl Image {
     pub fn save_png(&self, path: impl AsRef<Path>) -> Result<()> {
         let path = path.as_ref();
         let bytes = self.to_png()?;
-        std::fs::write(path, bytes).map_err(|e| Error::Io {
-            path: path.display().to_string(),
-            message: e.to_string(),
+        fmaps_mesh_io::atomic::write_atomically(path, |w| w.write_all(&bytes)).map_err(|e| {
+            Error::Io {
+                path: path.display().to_string(),
+                message: e.to_string(),
+            }
         })
     }
 }

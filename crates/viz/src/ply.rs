@@ -40,8 +40,10 @@ pub fn write_colored_ply(
 ) -> Result<()> {
     let path = path.as_ref();
     let text = colored_ply(vertices, faces, colors)?;
-    std::fs::write(path, text).map_err(|e| Error::Io {
-        path: path.display().to_string(),
-        message: e.to_string(),
+    fmaps_mesh_io::atomic::write_atomically(path, |w| w.write_all(text.as_bytes())).map_err(|e| {
+        Error::Io {
+            path: path.display().to_string(),
+            message: e.to_string(),
+        }
     })
 }
