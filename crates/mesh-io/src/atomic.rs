@@ -51,7 +51,7 @@ mod tests {
         fs::create_dir_all(&dir).unwrap();
         let p = dir.join("keep.txt");
         fs::write(&p, "old").unwrap();
-        let err = write_atomically(&p, &mut |w: &mut dyn Write| {
+        let err = write_atomically(&p, |w: &mut dyn Write| {
             w.write_all(b"half")?;
             Err(io::Error::other("disk full"))
         });
@@ -62,13 +62,11 @@ mod tests {
             1,
             "a temporary was left"
         );
-        write_atomically(&p, &mut |w: &mut dyn Write| w.write_all(b"new")).unwrap();
+        write_atomically(&p, |w: &mut dyn Write| w.write_all(b"new")).unwrap();
         assert_eq!(fs::read_to_string(&p).unwrap(), "new");
         assert_eq!(fs::read_dir(&dir).unwrap().count(), 1);
         // An unwritable target folder: an error, nothing created.
-        assert!(
-            write_atomically(&dir.join("no/such/dir/x"), &mut |_: &mut dyn Write| Ok(())).is_err()
-        );
+        assert!(write_atomically(&dir.join("no/such/dir/x"), |_: &mut dyn Write| Ok(())).is_err());
         fs::remove_dir_all(&dir).unwrap();
     }
 }
