@@ -254,6 +254,21 @@ pub(crate) fn emit(text: &str) -> Result<(), Failure> {
 /// A failure with its exit code: 2 for bad input, 1 for a runtime failure.
 struct Failure(u8, anyhow::Error);
 
+/// The error and its causes, each cause only when the text so far does
+/// not already say it (library errors often quote their source), so that
+/// no message is printed twice.
+fn message(e: &anyhow::Error) -> String {
+    let mut out = e.to_string();
+    for cause in e.chain().skip(1) {
+        let c = cause.to_string();
+        if !out.contains(&c) {
+            out.push_str(": ");
+            out.push_str(&c);
+        }
+    }
+    out
+}
+
 fn input<E: Into<anyhow::Error>>(e: E) -> Failure {
     Failure(2, e.into())
 }
@@ -329,7 +344,7 @@ fn main() -> ExitCode {
     match result {
         Ok(()) => ExitCode::SUCCESS,
         Err(Failure(code, e)) => {
-            eprintln!("error: {e:#}");
+            eprintln!("error: {}", message(&e));
             ExitCode::from(code)
         }
     }

@@ -241,7 +241,16 @@ pub(crate) fn match_cmd(args: &MatchArgs) -> Result<(), Failure> {
     let spinner = Spinner::new("matching");
     let r = match_shapes_with_progress(&a, &b, &params, &|s| spinner.stage(s)).map_err(
         |e| match e {
-            MatchError::InvalidParameter(_) => input(e),
+            // Parameters the meshes cannot satisfy are bad input, as in
+            // `fmaps spectrum`.
+            MatchError::InvalidParameter(_)
+            | MatchError::Spectrum {
+                source:
+                    fmaps::eigensolve::Error::InvalidK { .. }
+                    | fmaps::eigensolve::Error::NonPositiveMass { .. }
+                    | fmaps::eigensolve::Error::InvalidParameter(_),
+                ..
+            } => input(e),
             e => runtime(e),
         },
     )?;

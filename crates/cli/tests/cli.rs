@@ -781,3 +781,25 @@ fn outputs_are_atomic_and_never_clobber_inputs() {
     assert_eq!(std::fs::read(dir.join("a.off")).unwrap(), a_before);
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// Meshes too small for the asked eigenpairs are bad input (exit 2, as in
+/// `fmaps spectrum`), and the reason is printed once (issue 19, item 9).
+#[test]
+fn match_on_too_small_meshes_is_bad_input_said_once() {
+    let dir = tmpdir("small");
+    let m = fmaps::mesh_io::generate::icosphere(1.0, 0);
+    fmaps::mesh_io::write_mesh(dir.join("s.off"), &m).unwrap();
+    let out = fmaps()
+        .current_dir(&dir)
+        .args(["match", "s.off", "s.off", "--k", "3", "--k-process", "20"])
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    assert_eq!(
+        err.matches("cannot compute 20 eigenpairs").count(),
+        1,
+        "{err}"
+    );
+    std::fs::remove_dir_all(&dir).ok();
+}

@@ -281,10 +281,15 @@ impl MatchParams {
         }
         // WKS and HKS samples are combinations of the k_descr functions
         // φ_i²: far more samples than that only repeat them.
-        if self.n_descr > MAX_DESCR_PER_EIGENPAIR.saturating_mul(self.k_descr) {
+        let most = MAX_DESCR_PER_EIGENPAIR
+            .saturating_mul(self.k_descr)
+            .max(MAX_DESCR_ANY);
+        if self.n_descr > most {
             return bad(format!(
-                "n_descr = {} is more than {MAX_DESCR_PER_EIGENPAIR} x k_descr ({}): the descriptors are combinations of the {} functions φ_i², more samples only repeat them",
-                self.n_descr, self.k_descr, self.k_descr
+                "n_descr = {} is more than {most} (the larger of {MAX_DESCR_ANY} and {MAX_DESCR_PER_EIGENPAIR} x k_descr = {}): the descriptors are combinations of the {} functions φ_i², more samples only repeat them",
+                self.n_descr,
+                MAX_DESCR_PER_EIGENPAIR.saturating_mul(self.k_descr),
+                self.k_descr
             ));
         }
         if let Refinement::ZoomOut { zoomout, .. } = &self.refine
@@ -312,8 +317,12 @@ impl MatchParams {
     }
 }
 
-/// Descriptor samples allowed per eigenpair they are built from.
+/// Descriptor samples allowed per eigenpair they are built from, beyond
+/// [`MAX_DESCR_ANY`].
 pub const MAX_DESCR_PER_EIGENPAIR: usize = 4;
+
+/// Descriptor samples always allowed, whatever the number of eigenpairs.
+pub const MAX_DESCR_ANY: usize = 1000;
 
 /// Memory the descriptor matrices of one shape may take (2 GiB).
 pub const MAX_DESCRIPTOR_BYTES: usize = 1 << 31;
