@@ -1,0 +1,44 @@
+//! Shared helpers of the CLI tests.
+
+// Each test binary uses some of these helpers.
+#![allow(dead_code)]
+
+use std::path::PathBuf;
+use std::process::Command;
+
+pub fn fmaps() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_fmaps"))
+}
+
+/// Runs `cmd`, asserts success (showing stderr otherwise) and parses its
+/// stdout as one JSON object.
+pub fn json_of(cmd: &mut Command) -> serde_json::Value {
+    let out = cmd.output().unwrap();
+    assert!(
+        out.status.success(),
+        "{cmd:?}: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    serde_json::from_slice(&out.stdout).unwrap()
+}
+
+/// A unit square grid (25 vertices, area 1) in `dir`: g.off, the
+/// identity as ground truth g.vts and map id.map, and shift.map, one step
+/// (0.25) to the right except on the last column (mean error 0.25 * 20/25).
+pub fn grid_fixture(dir: &std::path::Path) -> (fmaps::mesh_io::TriMesh, Vec<usize>) {
+    let m = fmaps::mesh_io::generate::grid(1.0, 1.0, 4, 4);
+    fmaps::mesh_io::write_mesh(dir.join("g.off"), &m).unwrap();
+    let n = m.n_vertices();
+    let all: Vec<usize> = (0..n).collect();
+    fmaps::mesh_io::write_vts(dir.join("g.vts"), &all).unwrap();
+    fmaps::mesh_io::write_map(dir.join("id.map"), &all).unwrap();
+    let shifted: Vec<usize> = (0..n).map(|v| if v % 5 < 4 { v + 1 } else { v }).collect();
+    fmaps::mesh_io::write_map(dir.join("shift.map"), &shifted).unwrap();
+    (m, all)
+}
+
+pub fn tmpdir(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("fmaps-cli-{name}-{}", std::process::id()));
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}

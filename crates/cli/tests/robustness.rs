@@ -1,0 +1,218 @@
+//! What a careless or hostile user feeds the CLI (issue 19): units,
+//! typed sizes, outputs that must not clobber anything, inputs too small.
+
+mod common;
+use common::{fmaps, json_of, tmpdir};
+
+/// `fmaps match` gives the same map when the target is in other units
+/// (coordinates x1000), and `--json` says the shapes were normalized to
+/// unit area and what their areas were.
+#[test]
+fn match_does_not_depend_on_the_units() {
+    let dir = tmpdir("units");
+    let pair = fmaps::mesh_io::generate::creature_pair(3);
+    fmaps::mesh_io::write_mesh(dir.join("a.off"), &pair.source).unwrap();
+    fmaps::mesh_io::write_mesh(dir.join("b.off"), &pair.target).unwrap();
+    let big = pair.target.scaled(1000.0).unwrap();
+    fmaps::mesh_io::write_mesh(dir.join("b1000.off"), &big).unwrap();
+    let run = |target: &str, out: &str| -> serde_json::Value {
+        json_of(fmaps().current_dir(&dir).args([
+            "match",
+            "a.off",
+            target,
+            "--k",
+            "20",
+            "--k-process",
+            "50",
+            "--n-descr",
+            "30",
+            "--refine",
+            "zoomout",
+            "--zoomout",
+            "20:50:5",
+            "--starts",
+            "none",
+            "--threads",
+            "1",
+            "--json",
+            "--out",
+            out,
+        ]))
+    };
+    let (j1, j2) = (run("b.off", "m1.map"), run("b1000.off", "m2.map"));
+    let m1 = fmaps::mesh_io::read_map(dir.join("m1.map")).unwrap();
+    let m2 = fmaps::mesh_io::read_map(dir.join("m2.map")).unwrap();
+    assert_eq!(m1, m2);
+    assert_eq!(j2["area_normalized"], true);
+    let (a1, a2) = (
+        j1["input_areas"]["target"].as_f64().unwrap(),
+        j2["input_areas"]["target"].as_f64().unwrap(),
+    );
+    assert!((a2 / a1 - 1e6).abs() < 1e-6 * 1e6, "{a1} {a2}");
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// Sizes a user can type are bounded by what the input makes sensible,
+/// with exit code 2 and a reason, never a panic or a runaway allocation
+/// (issue 19, items 3-5): descriptor samples beyond 4 x the eigenpairs
+/// they come from, descriptor matrices beyond 2 GB (landmarks), threads
+/// beyond 4 per core; a ZoomOut step that would overflow just ends the
+/// schedule.
+#[test]
+fn typed_sizes_are_bounded() {
+    let dir = tmpdir("bounds");
+    let pair = fmaps::mesh_io::generate::creature_pair(2);
+    fmaps::mesh_io::write_mesh(dir.join("a.off"), &pair.source).unwrap();
+    fmaps::mesh_io::write_mesh(dir.join("b.off"), &pair.target).unwrap();
+    let n = pair.source.n_vertices();
+    // 20000 landmark lines: 1 + 20000 descriptor families.
+    let lines: String = (0..20000)
+        .map(|i| format!("{} {}\n", i % n + 1, i % n + 1))
+        .collect();
+    std::fs::write(dir.join("lm.txt"), lines).unwrap();
+    let m = [
+        "match",
+        "a.off",
+        "b.off",
+        "--k",
+        "10",
+        "--k-process",
+        "20",
+        "--threads",
+        "1",
+    ];
+    let run = |extra: &[&str]| {
+        let out = fmaps()
+            .current_dir(&dir)
+            .args(m)
+            .args(extra)
+            .output()
+            .unwrap();
+        (
+            out.status.code(),
+            String::from_utf8_lossy(&out.stderr).into_owned(),
+        )
+    };
+    for (extra, needle) in [
+        (vec!["--n-descr", "18446744073709551615"], "only repeat"),
+        (vec!["--n-descr", "100000"], "only repeat"),
+        (vec!["--n-descr", "50", "--landmarks", "lm.txt"], "GB"),
+    ] {
+        let (code, err) = run(&extra);
+        assert_eq!(code, Some(2), "{extra:?}: {err}");
+        assert!(
+            err.contains(needle) && !err.contains("panicked"),
+            "{extra:?}: {err}"
+        );
+    }
+    let (code, err) = run(&["--n-descr", "10", "--zoomout", "10:30:18446744073709551615"]);
+    assert_eq!(code, Some(0), "{err}");
+    let out = fmaps()
+        .args(["--threads", "100000", "info"])
+        .arg(dir.join("a.off"))
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("per core"));
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// Outputs never overwrite an input or each other, and a command that
+/// fails leaves every previous output as it was, with no temporary file
+/// behind (issue 19, item 6).
+#[test]
+fn outputs_are_atomic_and_never_clobber_inputs() {
+    let dir = tmpdir("atomic");
+    let pair = fmaps::mesh_io::generate::creature_pair(2);
+    fmaps::mesh_io::write_mesh(dir.join("a.off"), &pair.source).unwrap();
+    fmaps::mesh_io::write_mesh(dir.join("b.off"), &pair.target).unwrap();
+    let a_before = std::fs::read(dir.join("a.off")).unwrap();
+    std::fs::write(dir.join("keep.map"), "old content\n").unwrap();
+    let m = [
+        "match",
+        "a.off",
+        "b.off",
+        "--k",
+        "10",
+        "--k-process",
+        "20",
+        "--n-descr",
+        "10",
+    ];
+    let run = |extra: &[&str]| {
+        let out = fmaps()
+            .current_dir(&dir)
+            .args(m)
+            .args(extra)
+            .output()
+            .unwrap();
+        (
+            out.status.code(),
+            String::from_utf8_lossy(&out.stderr).into_owned(),
+        )
+    };
+    let (code, err) = run(&["--out", "a.off"]);
+    assert_eq!(code, Some(2), "{err}");
+    assert!(err.contains("overwrite the input"), "{err}");
+    let (code, err) = run(&["--out", "x.map", "--save-fmap", "./x.map"]);
+    assert_eq!(code, Some(2), "{err}");
+    assert!(err.contains("two outputs"), "{err}");
+    // The second output cannot be written: the first stays as it was.
+    let (code, err) = run(&["--out", "keep.map", "--save-fmap", "no/such/dir/C.txt"]);
+    assert_eq!(code, Some(1), "{err}");
+    assert_eq!(
+        std::fs::read_to_string(dir.join("keep.map")).unwrap(),
+        "old content\n"
+    );
+    assert_eq!(std::fs::read(dir.join("a.off")).unwrap(), a_before);
+    let mut names: Vec<String> = std::fs::read_dir(&dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    names.sort();
+    assert_eq!(
+        names,
+        ["a.off", "b.off", "keep.map"],
+        "temporaries left behind"
+    );
+    // Both written when both can be.
+    let (code, err) = run(&["--out", "keep.map", "--save-fmap", "C.txt"]);
+    assert_eq!(code, Some(0), "{err}");
+    assert_ne!(
+        std::fs::read_to_string(dir.join("keep.map")).unwrap(),
+        "old content\n"
+    );
+    assert!(dir.join("C.txt").exists());
+    // geodesic and spectrum refuse to overwrite their input too.
+    for args in [
+        vec!["geodesic", "a.off", "--source", "0", "--out", "a.off"],
+        vec!["spectrum", "a.off", "--k", "5", "--out", "a.off"],
+    ] {
+        let out = fmaps().current_dir(&dir).args(&args).output().unwrap();
+        assert_eq!(out.status.code(), Some(2), "{args:?}");
+    }
+    assert_eq!(std::fs::read(dir.join("a.off")).unwrap(), a_before);
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// Meshes too small for the asked eigenpairs are bad input (exit 2, as in
+/// `fmaps spectrum`), and the reason is printed once (issue 19, item 9).
+#[test]
+fn match_on_too_small_meshes_is_bad_input_said_once() {
+    let dir = tmpdir("small");
+    let m = fmaps::mesh_io::generate::icosphere(1.0, 0);
+    fmaps::mesh_io::write_mesh(dir.join("s.off"), &m).unwrap();
+    let out = fmaps()
+        .current_dir(&dir)
+        .args(["match", "s.off", "s.off", "--k", "3", "--k-process", "20"])
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    assert_eq!(
+        err.matches("cannot compute 20 eigenpairs").count(),
+        1,
+        "{err}"
+    );
+    std::fs::remove_dir_all(&dir).ok();
+}
