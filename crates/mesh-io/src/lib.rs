@@ -317,7 +317,11 @@ pub(crate) mod text {
         data: &'a [u8],
         format: &'static str,
     ) -> impl Iterator<Item = Result<(usize, &'a str), Error>> + 'a {
-        data.split(|&b| b == b'\n')
+        // A UTF-8 byte-order mark is not content; a file with carriage
+        // returns but no line feed uses them as line breaks (old Mac).
+        let data = strip_bom(data);
+        let eol = if data.contains(&b'\n') { b'\n' } else { b'\r' };
+        data.split(move |&b| b == eol)
             .enumerate()
             .filter_map(move |(i, raw)| {
                 let line = i + 1;
@@ -334,6 +338,11 @@ pub(crate) mod text {
                 let text = text.split('#').next().unwrap_or("").trim();
                 (!text.is_empty()).then_some(Ok((line, text)))
             })
+    }
+
+    /// `data` without a leading UTF-8 byte-order mark.
+    pub(crate) fn strip_bom(data: &[u8]) -> &[u8] {
+        data.strip_prefix(b"\xEF\xBB\xBF").unwrap_or(data)
     }
 
     /// Parses a finite coordinate.

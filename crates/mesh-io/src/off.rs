@@ -117,6 +117,15 @@ pub fn parse_off(data: &[u8]) -> Result<TriMesh> {
         }
         fan(&poly, &mut faces);
     }
+    // Data past the declared faces is a wrong count, not a comment.
+    if let Some(item) = lines.next() {
+        let (line, _) = item?;
+        return Err(parse_err(
+            FMT,
+            Location::Line(line),
+            format!("more data after the {nf} faces the header declares (a wrong face count?)"),
+        ));
+    }
     TriMesh::new(vertices, faces)
 }
 

@@ -89,6 +89,7 @@ struct Element {
 /// coordinates, negative or out-of-range indices, faces with fewer than 3
 /// vertices, non-integer indices, and truncated data.
 pub fn parse_ply(data: &[u8]) -> Result<TriMesh> {
+    let data = crate::text::strip_bom(data);
     let (encoding, elements, body_start, body_line) = parse_header(data)?;
     let vidx = elements
         .iter()

@@ -481,3 +481,38 @@ fn trimesh_new_rejects_invalid_arrays() {
         }
     ));
 }
+
+/// Silent misreads (issue 19, item 7): a UTF-8 byte-order mark is not
+/// content (an OBJ used to lose its first vertex), carriage-return-only
+/// line breaks are line breaks, and faces beyond the OFF header's count
+/// are an error naming the line instead of being dropped.
+#[test]
+fn bom_cr_only_and_extra_faces() {
+    let obj = "\u{feff}v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n";
+    assert_eq!(parse_obj(obj.as_bytes()).unwrap(), tet());
+    let off = "OFF\n4 4 0\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n3 0 2 1\n3 0 1 3\n3 0 3 2\n3 1 2 3\n";
+    assert_eq!(
+        parse_off(format!("\u{feff}{off}").as_bytes()).unwrap(),
+        tet()
+    );
+    assert_eq!(
+        parse_off(off.replace('\n', "\r").as_bytes()).unwrap(),
+        tet()
+    );
+    assert_eq!(
+        parse_off(off.replace('\n', "\r\n").as_bytes()).unwrap(),
+        tet()
+    );
+    parse_error_at(
+        parse_off(format!("{off}3 0 1 2\n").as_bytes()),
+        Location::Line(11),
+        "more data after the 4 faces",
+    );
+    let mut ply = Vec::new();
+    write_ply(&mut ply, &tet()).unwrap();
+    let mut with_bom = b"\xEF\xBB\xBF".to_vec();
+    with_bom.extend_from_slice(&ply);
+    assert_eq!(parse_ply(&with_bom).unwrap(), tet());
+    let map = b"\xEF\xBB\xBF3\n1\n2\n";
+    assert_eq!(parse_index_list(map, ".map").unwrap(), vec![2, 0, 1]);
+}
