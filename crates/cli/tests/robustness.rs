@@ -4,15 +4,21 @@
 mod common;
 use common::{fmaps, json_of, tmpdir};
 
+/// The built-in pair at `subdivisions`, written as a.off and b.off.
+fn write_pair(dir: &std::path::Path, subdivisions: u32) -> fmaps::mesh_io::generate::MeshPair {
+    let pair = fmaps::mesh_io::generate::creature_pair(subdivisions);
+    fmaps::mesh_io::write_mesh(dir.join("a.off"), &pair.source).unwrap();
+    fmaps::mesh_io::write_mesh(dir.join("b.off"), &pair.target).unwrap();
+    pair
+}
+
 /// `fmaps match` gives the same map when the target is in other units
 /// (coordinates x1000), and `--json` says the shapes were normalized to
 /// unit area and what their areas were.
 #[test]
 fn match_does_not_depend_on_the_units() {
     let dir = tmpdir("units");
-    let pair = fmaps::mesh_io::generate::creature_pair(3);
-    fmaps::mesh_io::write_mesh(dir.join("a.off"), &pair.source).unwrap();
-    fmaps::mesh_io::write_mesh(dir.join("b.off"), &pair.target).unwrap();
+    let pair = write_pair(&dir, 3);
     let big = pair.target.scaled(1000.0).unwrap();
     fmaps::mesh_io::write_mesh(dir.join("b1000.off"), &big).unwrap();
     let run = |target: &str, out: &str| -> serde_json::Value {
@@ -61,9 +67,7 @@ fn match_does_not_depend_on_the_units() {
 #[test]
 fn typed_sizes_are_bounded() {
     let dir = tmpdir("bounds");
-    let pair = fmaps::mesh_io::generate::creature_pair(2);
-    fmaps::mesh_io::write_mesh(dir.join("a.off"), &pair.source).unwrap();
-    fmaps::mesh_io::write_mesh(dir.join("b.off"), &pair.target).unwrap();
+    let pair = write_pair(&dir, 2);
     let n = pair.source.n_vertices();
     // 20000 landmark lines: 1 + 20000 descriptor families.
     let lines: String = (0..20000)
@@ -123,9 +127,7 @@ fn typed_sizes_are_bounded() {
 #[test]
 fn outputs_are_atomic_and_never_clobber_inputs() {
     let dir = tmpdir("atomic");
-    let pair = fmaps::mesh_io::generate::creature_pair(2);
-    fmaps::mesh_io::write_mesh(dir.join("a.off"), &pair.source).unwrap();
-    fmaps::mesh_io::write_mesh(dir.join("b.off"), &pair.target).unwrap();
+    write_pair(&dir, 2);
     let a_before = std::fs::read(dir.join("a.off")).unwrap();
     std::fs::write(dir.join("keep.map"), "old content\n").unwrap();
     let m = [
