@@ -59,6 +59,14 @@ fn permuted_copy_round_trip() {
 fn bad_sizes_are_errors() {
     let b = basis(&bumpy(), 10);
     let n = b.n();
+    // A functional map that is not finite has no point map: an error, not
+    // an out-of-range index.
+    let mut nan = DMatrix::identity(10, 10);
+    nan[(3, 4)] = f64::NAN;
+    assert!(matches!(
+        point_map_from_fmap(&nan, &b, &b),
+        Err(Error::Search(fmaps_nn::Error::NonFinite { .. }))
+    ));
     assert!(matches!(
         fmap_from_point_map(&[0, 1], &b, &b),
         Err(Error::SizeMismatch { .. })
