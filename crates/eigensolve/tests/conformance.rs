@@ -167,7 +167,7 @@ fn backends_agree_with_the_dense_reference() {
 #[test]
 fn two_disjoint_spheres_have_two_zero_eigenvalues() {
     let s = icosphere(1.0, 2);
-    let mesh = disjoint_union(&s, &translated(&s, [4.0, 0.0, 0.0]));
+    let mesh = disjoint_union(&s, &translated(&s, [4.0, 0.0, 0.0]).unwrap());
     let o = op(&mesh);
     for s in backends() {
         let b = solve(s.as_ref(), &o, 8);

@@ -124,7 +124,7 @@ fn sphere_distances_approach_great_circles() {
 #[test]
 fn disconnected_meshes_give_infinity() {
     let s = icosphere(1.0, 1);
-    let mesh = disjoint_union(&s, &translated(&s, [3.0, 0.0, 0.0]));
+    let mesh = disjoint_union(&s, &translated(&s, [3.0, 0.0, 0.0]).unwrap());
     let n = s.n_vertices();
     for solver in [
         Box::new(ExactSolver::new(&mesh).unwrap()) as Box<dyn DistanceSolver>,
@@ -370,7 +370,7 @@ fn vtp_agrees_with_window_ordered_propagation() {
             "two spheres",
             disjoint_union(
                 &icosphere(1.0, 2),
-                &translated(&noisy_sphere(), [3.0, 0.0, 0.0]),
+                &translated(&noisy_sphere(), [3.0, 0.0, 0.0]).unwrap(),
             ),
         ),
     ];

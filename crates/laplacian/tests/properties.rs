@@ -25,7 +25,7 @@ fn meshes() -> Vec<(&'static str, TriMesh)> {
         ("grid (boundary)", grid(2.0, 1.0, 7, 5)),
         (
             "two spheres",
-            disjoint_union(&s, &translated(&s, [3.0, 0.0, 0.0])),
+            disjoint_union(&s, &translated(&s, [3.0, 0.0, 0.0]).unwrap()),
         ),
         ("zero-area face", with_zero_area_face()),
     ]
@@ -77,7 +77,7 @@ fn kernel_dimension_is_the_number_of_components() {
             "two spheres",
             disjoint_union(
                 &icosphere(1.0, 1),
-                &translated(&icosphere(1.0, 1), [3.0, 0.0, 0.0]),
+                &translated(&icosphere(1.0, 1), [3.0, 0.0, 0.0]).unwrap(),
             ),
             2,
         ),

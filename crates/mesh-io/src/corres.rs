@@ -69,17 +69,25 @@ pub fn check_indices(indices: &[usize], n_vertices: usize, path: Option<&Path>) 
         Some(line0) => Err(Error::IndexOutOfRange {
             path: path.map(Path::to_path_buf),
             line: line0 + 1,
-            index: indices[line0] + 1,
+            index: indices[line0].saturating_add(1),
             n_vertices,
         }),
     }
 }
 
-/// Writes 0-based indices as a 1-based list, one per line.
+/// Writes 0-based indices as a 1-based list, one per line. An index of
+/// `usize::MAX` has no 1-based form: an `InvalidInput` error naming its
+/// entry.
 pub fn write_index_list<W: Write>(w: &mut W, indices: &[usize]) -> io::Result<()> {
     let mut s = String::with_capacity(indices.len() * 6);
-    for &i in indices {
-        s.push_str(&(i + 1).to_string());
+    for (k, &i) in indices.iter().enumerate() {
+        let one_based = i.checked_add(1).ok_or_else(|| {
+            io::Error::new(
+                io::ErrorKind::InvalidInput,
+                format!("entry {k}: index {i} has no 1-based form"),
+            )
+        })?;
+        s.push_str(&one_based.to_string());
         s.push('\n');
     }
     w.write_all(s.as_bytes())

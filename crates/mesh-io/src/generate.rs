@@ -3,7 +3,7 @@
 
 use std::collections::HashMap;
 
-use crate::TriMesh;
+use crate::{Result, TriMesh};
 
 pub use crate::creature::{MeshPair, Pose, creature, creature_pair};
 
@@ -132,14 +132,15 @@ pub fn disjoint_union(a: &TriMesh, b: &TriMesh) -> TriMesh {
     TriMesh::new(v, f).expect("union of valid meshes is valid")
 }
 
-/// Moves every vertex by `offset`.
-pub fn translated(mesh: &TriMesh, offset: [f64; 3]) -> TriMesh {
+/// Moves every vertex by `offset`. Errors when a coordinate leaves the
+/// finite range (a non-finite or huge offset).
+pub fn translated(mesh: &TriMesh, offset: [f64; 3]) -> Result<TriMesh> {
     let v = mesh
         .vertices()
         .iter()
         .map(|p| [p[0] + offset[0], p[1] + offset[1], p[2] + offset[2]])
         .collect();
-    TriMesh::new(v, mesh.faces().to_vec()).expect("translation keeps a valid mesh valid")
+    TriMesh::new(v, mesh.faces().to_vec())
 }
 
 /// One step of 1-to-4 midpoint subdivision: a new vertex at the midpoint of
@@ -156,10 +157,12 @@ pub fn subdivide(mesh: &TriMesh) -> TriMesh {
             let (a, b) = (t[k], t[(k + 1) % 3]);
             m[k] = *mid.entry((a.min(b), a.max(b))).or_insert_with(|| {
                 let (pa, pb) = (v[a], v[b]);
+                // Halves first: finite for any finite endpoints (the sum of
+                // two coordinates near f64::MAX would overflow).
                 v.push([
-                    (pa[0] + pb[0]) / 2.0,
-                    (pa[1] + pb[1]) / 2.0,
-                    (pa[2] + pb[2]) / 2.0,
+                    pa[0] / 2.0 + pb[0] / 2.0,
+                    pa[1] / 2.0 + pb[1] / 2.0,
+                    pa[2] / 2.0 + pb[2] / 2.0,
                 ]);
                 v.len() - 1
             });
@@ -169,5 +172,8 @@ pub fn subdivide(mesh: &TriMesh) -> TriMesh {
         f.push([t[2], m[2], m[1]]);
         f.push(m);
     }
+    // Finite midpoints and indices below the new vertex count: the checks
+    // of `TriMesh::new` (finite coordinates, indices in range, not empty)
+    // hold by construction.
     TriMesh::new(v, f).expect("subdivision of a valid mesh is valid")
 }

@@ -414,6 +414,11 @@ fn index_lists_are_one_based_on_disk() {
     }
     let mut out = Vec::new();
     write_index_list(&mut out, &[0, 4, 2]).unwrap();
+    // usize::MAX has no 1-based form: an error naming the entry, no panic.
+    let e = write_index_list(&mut Vec::new(), &[3, usize::MAX]).unwrap_err();
+    assert_eq!(e.kind(), std::io::ErrorKind::InvalidInput);
+    assert!(e.to_string().contains("entry 1"), "{e}");
+    assert!(check_indices(&[usize::MAX], 5, None).is_err());
     assert_eq!(out, b"1\n5\n3\n");
 }
 

@@ -60,7 +60,7 @@ fn grid_is_a_disk_with_one_boundary_loop() {
 #[test]
 fn two_spheres_are_two_components() {
     let a = icosphere(1.0, 1);
-    let b = translated(&a, [5.0, 0.0, 0.0]);
+    let b = translated(&a, [5.0, 0.0, 0.0]).unwrap();
     let r = disjoint_union(&a, &b).validate();
     assert_eq!(r.connected_components, 2);
     assert_eq!(r.euler_characteristic, 4);
@@ -153,4 +153,19 @@ fn face_adjacency_is_mutual_and_none_on_the_boundary() {
         .count();
     assert_eq!(boundary, g.validate().boundary_edges);
     assert!(g.face_adjacency().non_manifold_edges.is_empty());
+}
+
+/// The generators never panic on extreme input (issue 19, item 10): a
+/// translation out of the finite range is an error, and subdivision of a
+/// mesh with coordinates near f64::MAX keeps every midpoint finite.
+#[test]
+fn translation_and_subdivision_at_the_edge_of_f64() {
+    use fmaps_mesh_io::generate::{subdivide, translated};
+    let g = grid(1.0, 1.0, 2, 2);
+    assert!(translated(&g, [f64::MAX, 0.0, 0.0]).is_ok());
+    assert!(translated(&g, [f64::INFINITY, 0.0, 0.0]).is_err());
+    let huge = translated(&g, [f64::MAX, 0.0, 0.0]).unwrap();
+    assert!(translated(&huge, [f64::MAX, 0.0, 0.0]).is_err());
+    let s = subdivide(&huge.scaled(1.0).unwrap());
+    assert!(s.vertices().iter().flatten().all(|c| c.is_finite()));
 }
