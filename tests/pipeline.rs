@@ -272,3 +272,31 @@ fn the_map_does_not_depend_on_the_units() {
         "unnormalized 1e3-scaled target: {same} of {n} agree"
     );
 }
+
+/// A sphere's descriptors are constant: matching onto (or from) it leaves
+/// C undetermined. The pipeline says so instead of returning a map of
+/// 1e11-sized coefficients that sends every vertex to one vertex
+/// (issue 19, item 1); a sphere onto itself stays the identity.
+#[test]
+fn an_undetermined_map_is_an_error() {
+    let (a, s) = (blob(), icosphere(1.0, 3));
+    let p = MatchParams {
+        k: 10,
+        k_process: 20,
+        k_descr: 20,
+        ..MatchParams::default()
+    };
+    for (x, y) in [(&a, &s), (&s, &a)] {
+        match match_shapes(x, y, &p) {
+            Err(MatchError::Undetermined {
+                max_entry, rank, k, ..
+            }) => {
+                assert!(max_entry > 1e3 || 2 * rank < k, "{max_entry} {rank} {k}");
+                let msg = match_shapes(x, y, &p).unwrap_err().to_string();
+                assert!(msg.contains("Try landmarks"), "{msg}");
+            }
+            other => panic!("expected Undetermined, got {:?}", other.map(|r| r.c_ba)),
+        }
+    }
+    assert!(match_shapes(&a, &a, &p).is_ok());
+}

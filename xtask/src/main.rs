@@ -58,6 +58,8 @@ enum Command {
     Pictures(pictures::Args),
     /// Every test: `cargo test --workspace` (tidy tests included), then the nearest-neighbour tests without AMX tiles.
     Test(test::Args),
+    /// The parsers' property tests with 10,000 cases each (release build): mesh formats, correspondence and landmark files, option syntaxes, and the CLI's nasty-input corpus.
+    Fuzz(test::FuzzArgs),
     /// crates.io readiness of every crate: metadata, licences, docs, `cargo publish --dry-run` in dependency order.
     PublishCheck(publish_check::Args),
     /// (Internal) runs a program and records its peak memory, for the
@@ -81,6 +83,7 @@ fn main() -> anyhow::Result<()> {
         Command::Pictures(a) => pictures::pictures(&a),
         Command::PublishCheck(a) => publish_check::publish_check(&a),
         Command::Test(a) => test::test(&a),
+        Command::Fuzz(a) => test::fuzz(&a),
         Command::MeasureChild { args } => std::process::exit(util::measure_child(&args)?),
         Command::BenchMatch(a) => bench_match::bench_match(&a),
         Command::BenchRefine(a) => bench_refine::bench_refine(&a),

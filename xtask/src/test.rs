@@ -53,3 +53,27 @@ pub fn test(args: &Args) -> anyhow::Result<()> {
     cargo(&all, &[])?;
     cargo(&["test", "-p", "fmaps-nn"], &[("FMAPS_NO_AMX", "1")])
 }
+
+/// Options of `cargo xtask fuzz`.
+#[derive(clap::Args)]
+pub struct FuzzArgs {
+    /// Cases per property.
+    #[arg(long, default_value_t = 10_000)]
+    cases: u32,
+}
+
+/// The fuzz targets: every parser's property tests (arbitrary and mutated
+/// bytes, allocation bounds, write-read round trips), the option syntaxes,
+/// and the CLI's corpus of nasty inputs through every subcommand.
+pub fn fuzz(args: &FuzzArgs) -> anyhow::Result<()> {
+    let cases = args.cases.to_string();
+    let env = [("FMAPS_FUZZ_CASES", cases.as_str())];
+    for (package, test) in [
+        ("fmaps-mesh-io", "proptest"),
+        ("fmaps-tests", "fuzz"),
+        ("fmaps-cli", "corpus"),
+    ] {
+        cargo(&["test", "--release", "-p", package, "--test", test], &env)?;
+    }
+    Ok(())
+}

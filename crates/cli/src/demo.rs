@@ -14,9 +14,9 @@ use serde_json::json;
 use crate::{Failure, emit, outln, runtime};
 
 pub(crate) fn run(out_dir: &Path, subdivisions: u32, as_json: bool) -> Result<(), Failure> {
-    if !(2..=6).contains(&subdivisions) {
+    if !(3..=6).contains(&subdivisions) {
         return Err(crate::input(anyhow::anyhow!(
-            "--subdivisions {subdivisions}: use 2..=6 (4 = 2,562 vertices, 5 = 10,242)"
+            "--subdivisions {subdivisions}: use 3..=6 (3 = 642 vertices, 4 = 2,562, 5 = 10,242; ZoomOut to 150 eigenpairs needs more than 162)"
         )));
     }
     let t0 = Instant::now();
@@ -53,10 +53,13 @@ pub(crate) fn run(out_dir: &Path, subdivisions: u32, as_json: bool) -> Result<()
     std::fs::create_dir_all(out_dir)
         .map_err(|e| runtime(anyhow::anyhow!("{}: {e}", out_dir.display())))?;
     let view = View::default();
+    // Every picture is staged and all are renamed into place at the end:
+    // a failure leaves the folder as it was.
+    let mut staged = crate::outputs::Staged::default();
     let mut written = Vec::new();
     let mut save = |img: viz::Image, name: &str| -> Result<(), Failure> {
         let p = out_dir.join(name);
-        img.save_png(&p).map_err(runtime)?;
+        staged.stage(&p, |tmp| Ok(img.save_png(tmp)?))?;
         written.push(p.display().to_string());
         Ok(())
     };
@@ -110,9 +113,17 @@ pub(crate) fn run(out_dir: &Path, subdivisions: u32, as_json: bool) -> Result<()
     )?;
     for (mesh, colors, name) in [(a, &cs, "source.ply"), (b, &ct, "target.ply")] {
         let p = out_dir.join(name);
-        viz::write_colored_ply(&p, mesh.vertices(), mesh.faces(), colors).map_err(runtime)?;
+        staged.stage(&p, |tmp| {
+            Ok(viz::write_colored_ply(
+                tmp,
+                mesh.vertices(),
+                mesh.faces(),
+                colors,
+            )?)
+        })?;
         written.push(p.display().to_string());
     }
+    staged.commit()?;
     let total = t0.elapsed().as_secs_f64();
     drop(spinner);
 

@@ -15,7 +15,7 @@ pub(crate) fn eval(
         .map(|p| read_indices(p, a.n_vertices(), false))
         .transpose()?;
     let spinner = Spinner::new(format!("{} geodesics on the target", method.name()));
-    let solver = distance_solver(&b, method)?;
+    let solver = distance_solver(&b, &files.target, method)?;
     let r = evaluate(
         &b,
         solver.as_ref(),
@@ -24,7 +24,7 @@ pub(crate) fn eval(
         t_ba.as_deref(),
         &EvalParams::default(),
     )
-    .map_err(input)?;
+    .map_err(input_on(&files.target))?;
     drop(spinner);
     let seconds = t.elapsed().as_secs_f64();
     if json {

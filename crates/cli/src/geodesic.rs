@@ -14,8 +14,8 @@ pub(crate) fn geodesic(
     }
     let mesh = load(path)?;
     let t = Instant::now();
-    let solver = distance_solver(&mesh, method)?;
-    let d = solver.distances(sources).map_err(input)?;
+    let solver = distance_solver(&mesh, path, method)?;
+    let d = solver.distances(sources).map_err(input_on(path))?;
     let seconds = t.elapsed().as_secs_f64();
     if let Some(out) = out {
         let mut text = String::with_capacity(d.len() * 20);

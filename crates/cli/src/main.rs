@@ -354,20 +354,32 @@ fn load(path: &Path) -> Result<TriMesh, Failure> {
     mesh_io::read_mesh(path).map_err(input)
 }
 
+/// A bad-input failure about the mesh at `path` (the message names it).
+fn input_on<E>(path: &Path) -> impl Fn(E) -> Failure + '_
+where
+    E: std::error::Error + Send + Sync + 'static,
+{
+    move |e| input(anyhow::Error::new(e).context(path.display().to_string()))
+}
+
+/// The geodesic solver `method` on `mesh` (read from `path`, which errors
+/// name).
 fn distance_solver(
     mesh: &TriMesh,
+    path: &Path,
     method: GeodesicMethod,
 ) -> Result<Box<dyn fmaps::geodesic::DistanceSolver>, Failure> {
     use fmaps::geodesic::{DijkstraSolver, ExactSolver, HeatParams, HeatSolver};
+    let on = input_on(path);
     Ok(match method {
-        GeodesicMethod::Exact => Box::new(ExactSolver::new(mesh).map_err(input)?),
+        GeodesicMethod::Exact => Box::new(ExactSolver::new(mesh).map_err(on)?),
         GeodesicMethod::ExactOrdered => Box::new(
             ExactSolver::new(mesh)
-                .map_err(input)?
+                .map_err(on)?
                 .with_algorithm(fmaps::geodesic::ExactAlgorithm::WindowOrdered),
         ),
         GeodesicMethod::Heat => {
-            Box::new(HeatSolver::new(mesh, &HeatParams::default()).map_err(input)?)
+            Box::new(HeatSolver::new(mesh, &HeatParams::default()).map_err(on)?)
         }
         GeodesicMethod::Dijkstra => Box::new(DijkstraSolver::new(mesh)),
     })
@@ -433,7 +445,13 @@ impl EvalFiles {
                 .map(|p| read_indices(p, b.n_vertices(), true))
                 .transpose()?,
         )
-        .map_err(input)?;
+        .map_err(|e| {
+            input(anyhow::Error::new(e).context(format!(
+                "ground truth {} / {}",
+                files.gt_source.display(),
+                files.gt_target.display()
+            )))
+        })?;
         Ok(EvalInputs {
             a,
             b,

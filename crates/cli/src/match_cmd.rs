@@ -96,42 +96,8 @@ pub(crate) enum RefineKind {
     Zoomout,
 }
 
-pub(crate) fn read_landmarks(path: &Path) -> Result<Vec<(usize, usize)>, Failure> {
-    let text = std::fs::read_to_string(path)
-        .map_err(|e| input(anyhow::anyhow!("{}: {e}", path.display())))?;
-    let mut out = Vec::new();
-    for (line_no, line) in text.lines().enumerate() {
-        let fields: Vec<&str> = line.split_whitespace().collect();
-        if fields.is_empty() {
-            continue;
-        }
-        let parse = |f: &str| -> Result<usize, Failure> {
-            match f.parse::<usize>() {
-                Ok(v) if v >= 1 => Ok(v - 1),
-                _ => Err(input(anyhow::anyhow!(
-                    "{}:{}: '{f}' is not a 1-based vertex index",
-                    path.display(),
-                    line_no + 1
-                ))),
-            }
-        };
-        match fields.as_slice() {
-            [a] => {
-                let a = parse(a)?;
-                out.push((a, a));
-            }
-            [a, b] => out.push((parse(a)?, parse(b)?)),
-            _ => {
-                return Err(input(anyhow::anyhow!(
-                    "{}:{}: expected one or two vertex indices, found {}",
-                    path.display(),
-                    line_no + 1,
-                    fields.len()
-                )));
-            }
-        }
-    }
-    Ok(out)
+pub(crate) fn read_landmarks(path: &Path) -> Result<mesh_io::Landmarks, Failure> {
+    mesh_io::read_landmarks(path).map_err(input)
 }
 
 /// The refinement asked for on the command line.
@@ -190,21 +156,14 @@ pub(crate) fn params_of(args: &MatchArgs) -> Result<MatchParams, Failure> {
         ..MatchParams::default()
     };
     if let Some(p) = &args.landmarks {
-        params.landmarks = read_landmarks(p)?;
+        params.landmarks = read_landmarks(p)?.pairs;
     }
     params.adjoint = args.adjoint;
     params.area_normalize = !args.no_area_normalize;
     params.refine = refinement(args)?;
-    params.starts = match args.starts.as_deref().map(str::trim) {
-        Some("none") => Vec::new(),
-        Some(list) => match list.split(',').map(|s| s.trim().parse::<usize>()).collect() {
-            Ok(v) => v,
-            Err(_) => {
-                return Err(input(anyhow::anyhow!(
-                    "--starts '{list}': expected sizes K1,K2,.. (e.g. 20,30) or none"
-                )));
-            }
-        },
+    params.starts = match args.starts.as_deref() {
+        Some(text) => fmaps::pipeline::parse_starts(text)
+            .map_err(|e| input(anyhow::anyhow!("--starts {e}")))?,
         // The default further starts, those the computed basis allows.
         None if matches!(params.refine, fmaps::pipeline::Refinement::ZoomOut { .. }) => {
             let k_process = params.k_process.max(params.refine.k_needed());
@@ -238,22 +197,48 @@ pub(crate) fn match_cmd(args: &MatchArgs) -> Result<(), Failure> {
     let b = load(&args.target)?;
     let load_seconds = t.elapsed().as_secs_f64();
     let params = params_of(args)?;
+    if let Some(p) = &args.landmarks {
+        // Out-of-range landmarks, named by file and line as written.
+        read_landmarks(p)?
+            .check(a.n_vertices(), b.n_vertices(), Some(p))
+            .map_err(input)?;
+    }
     let spinner = Spinner::new("matching");
-    let r = match_shapes_with_progress(&a, &b, &params, &|s| spinner.stage(s)).map_err(
-        |e| match e {
-            // Parameters the meshes cannot satisfy are bad input, as in
-            // `fmaps spectrum`.
+    let r = match_shapes_with_progress(&a, &b, &params, &|s| spinner.stage(s)).map_err(|e| {
+        // The file of the shape an error is about, when it is about one.
+        let file = match &e {
+            MatchError::Spectrum { shape, .. } | MatchError::InvalidShape { shape, .. } => {
+                Some(if *shape == "target" {
+                    &args.target
+                } else {
+                    &args.source
+                })
+            }
+            _ => None,
+        };
+        // Parameters the meshes cannot satisfy are bad input, as in
+        // `fmaps spectrum`.
+        let code = match e {
             MatchError::InvalidParameter(_)
+            | MatchError::InvalidShape { .. }
             | MatchError::Spectrum {
                 source:
                     fmaps::eigensolve::Error::InvalidK { .. }
                     | fmaps::eigensolve::Error::NonPositiveMass { .. }
                     | fmaps::eigensolve::Error::InvalidParameter(_),
                 ..
-            } => input(e),
-            e => runtime(e),
-        },
-    )?;
+            } => 2,
+            _ => 1,
+        };
+        let e = anyhow::Error::new(e);
+        Failure(
+            code,
+            match file {
+                Some(p) => e.context(p.display().to_string()),
+                None => e,
+            },
+        )
+    })?;
     drop(spinner);
     let mut staged = crate::outputs::Staged::default();
     if let Some(out) = &args.out {

@@ -232,9 +232,87 @@ fmaps render scalar tr_reg_000.off --values dist.txt --title distance --out dist
     },
 }
 
+/// The `--ply PREFIX` files of `render transfer`.
+fn transfer_ply(prefix: &Path, side: &str) -> PathBuf {
+    PathBuf::from(format!("{}-{side}.ply", prefix.display()))
+}
+
+impl RenderCommand {
+    /// The files the command reads and those it writes.
+    fn files(&self) -> (Vec<&Path>, Vec<PathBuf>) {
+        let mut outs = Vec::new();
+        let ins: Vec<&Path> = match self {
+            RenderCommand::Transfer {
+                source,
+                target,
+                map,
+                out,
+                ply,
+                ..
+            } => {
+                outs.push(out.clone());
+                if let Some(p) = ply {
+                    outs.extend(["source", "target"].map(|side| transfer_ply(p, side)));
+                }
+                vec![source, target, map]
+            }
+            RenderCommand::Error {
+                files, out, ply, ..
+            } => {
+                outs.push(out.clone());
+                outs.extend(ply.clone());
+                let mut ins: Vec<&Path> = vec![
+                    &files.source,
+                    &files.target,
+                    &files.map,
+                    &files.gt_source,
+                    &files.gt_target,
+                ];
+                ins.extend(files.sym_gt_target.as_deref());
+                ins
+            }
+            RenderCommand::Fmap { matrix, out, .. } => {
+                outs.push(out.clone());
+                vec![matrix]
+            }
+            RenderCommand::Embedding { mesh, out, .. } => {
+                outs.push(out.clone());
+                vec![mesh]
+            }
+            RenderCommand::Curves { reports, out, .. } => {
+                outs.push(out.clone());
+                reports.iter().map(PathBuf::as_path).collect()
+            }
+            RenderCommand::Scalar {
+                mesh,
+                values,
+                out,
+                ply,
+                ..
+            } => {
+                outs.push(out.clone());
+                outs.extend(ply.clone());
+                vec![mesh, values]
+            }
+        };
+        (ins.into_iter().map(|p| p as &Path).collect(), outs)
+    }
+}
+
+/// The pictures and PLY files of one command, written together at the end
+/// (none of them if anything fails).
+#[derive(Default)]
+struct Written {
+    staged: crate::outputs::Staged,
+    names: Vec<String>,
+}
+
 pub(crate) fn run(cmd: RenderCommand) -> Result<(), Failure> {
     let t = Instant::now();
-    let mut written = Vec::new();
+    let (ins, outs) = cmd.files();
+    let out_refs: Vec<&Path> = outs.iter().map(PathBuf::as_path).collect();
+    crate::outputs::check_outputs(&ins, &out_refs)?;
+    let mut written = Written::default();
     let mut extra = serde_json::Map::new();
     let mut o = String::new();
     let json = match cmd {
@@ -270,8 +348,7 @@ pub(crate) fn run(cmd: RenderCommand) -> Result<(), Failure> {
             save(&img, &out, &mut written)?;
             if let Some(prefix) = ply {
                 for (mesh, colors, side) in [(&a, &cs, "source"), (&b, &ct, "target")] {
-                    let p = PathBuf::from(format!("{}-{side}.ply", prefix.display()));
-                    save_ply(mesh, colors, &p, &mut written)?;
+                    save_ply(mesh, colors, &transfer_ply(&prefix, side), &mut written)?;
                 }
             }
             json
@@ -295,7 +372,7 @@ pub(crate) fn run(cmd: RenderCommand) -> Result<(), Failure> {
                 gt,
             } = files.load()?;
             let spinner = crate::Spinner::new(format!("{} geodesics", geodesic.name()));
-            let solver = crate::distance_solver(&b, geodesic)?;
+            let solver = crate::distance_solver(&b, &files.target, geodesic)?;
             let r = fmaps::eval::evaluate(
                 &b,
                 solver.as_ref(),
@@ -304,7 +381,7 @@ pub(crate) fn run(cmd: RenderCommand) -> Result<(), Failure> {
                 None,
                 &fmaps::eval::EvalParams::default(),
             )
-            .map_err(input)?;
+            .map_err(crate::input_on(&files.target))?;
             drop(spinner);
             let (errors, title) = match &r.sym_errors {
                 Some(s) => (s, "symmetry-aware error"),
@@ -389,16 +466,22 @@ pub(crate) fn run(cmd: RenderCommand) -> Result<(), Failure> {
                     eigs.len()
                 ))
             })?;
+            let top = which.iter().max().copied().unwrap_or(0);
+            if top > MAX_EIG_INDEX {
+                return Err(input(anyhow::anyhow!(
+                    "--eigs: index {top} is above {MAX_EIG_INDEX} (eigenfunctions that high oscillate below the resolution of a picture)"
+                )));
+            }
             let m = load(&mesh)?;
-            let k = which.iter().max().copied().unwrap_or(0) + 1;
+            let k = top + 1;
             if k >= m.n_vertices() {
                 return Err(input(anyhow::anyhow!(
-                    "--eigs: index {} needs more eigenpairs than {} has vertices",
-                    k - 1,
+                    "--eigs: index {top} needs more eigenpairs than {} has vertices",
                     mesh.display()
                 )));
             }
-            let s = fmaps::spectrum(&m, k, &fmaps::SpectrumParams::default()).map_err(runtime)?;
+            let s = fmaps::spectrum(&m, k, &fmaps::SpectrumParams::default())
+                .map_err(|e| crate::spectrum::spectrum_failure(e, &mesh.display().to_string()))?;
             let img =
                 fmaps::pictures::spectral_embedding(&m, &s.basis, which, &view).map_err(runtime)?;
             save(&img, &out, &mut written)?;
@@ -479,6 +562,9 @@ pub(crate) fn run(cmd: RenderCommand) -> Result<(), Failure> {
             json
         }
     };
+    let Written { staged, names } = written;
+    staged.commit()?;
+    let written = names;
     let seconds = t.elapsed().as_secs_f64();
     if json {
         extra.insert("written".into(), json!(written));
@@ -491,6 +577,9 @@ pub(crate) fn run(cmd: RenderCommand) -> Result<(), Failure> {
     emit(&o)
 }
 
+/// The highest eigenfunction `render embedding` draws.
+const MAX_EIG_INDEX: usize = 1000;
+
 fn positive(flag: &str, x: f64) -> Result<(), Failure> {
     if x.is_finite() && x > 0.0 {
         Ok(())
@@ -499,10 +588,9 @@ fn positive(flag: &str, x: f64) -> Result<(), Failure> {
     }
 }
 
-fn save(img: &Image, path: &Path, written: &mut Vec<String>) -> Result<(), Failure> {
-    img.save_png(path)
-        .map_err(|e| runtime(anyhow::anyhow!("{}: {e}", path.display())))?;
-    written.push(path.display().to_string());
+fn save(img: &Image, path: &Path, written: &mut Written) -> Result<(), Failure> {
+    written.staged.stage(path, |tmp| Ok(img.save_png(tmp)?))?;
+    written.names.push(path.display().to_string());
     Ok(())
 }
 
@@ -510,16 +598,25 @@ fn save_ply(
     mesh: &TriMesh,
     colors: &[[u8; 3]],
     path: &Path,
-    written: &mut Vec<String>,
+    written: &mut Written,
 ) -> Result<(), Failure> {
-    viz::write_colored_ply(path, mesh.vertices(), mesh.faces(), colors)
-        .map_err(|e| runtime(anyhow::anyhow!("{}: {e}", path.display())))?;
-    written.push(path.display().to_string());
+    written.staged.stage(path, |tmp| {
+        Ok(viz::write_colored_ply(
+            tmp,
+            mesh.vertices(),
+            mesh.faces(),
+            colors,
+        )?)
+    })?;
+    written.names.push(path.display().to_string());
     Ok(())
 }
 
 fn read_text(path: &Path) -> Result<String, Failure> {
-    std::fs::read_to_string(path).map_err(|e| input(anyhow::anyhow!("{}: {e}", path.display())))
+    use fmaps::mesh_io;
+    let bytes = mesh_io::read_bounded(path, mesh_io::MAX_INPUT_BYTES).map_err(input)?;
+    String::from_utf8(bytes)
+        .map_err(|_| input(anyhow::anyhow!("{}: not valid UTF-8 text", path.display())))
 }
 
 /// A dense matrix, one row per non-empty line.

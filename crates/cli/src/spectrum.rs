@@ -2,6 +2,19 @@
 
 use super::*;
 
+/// An eigensolver error about the mesh `name`: bad input (exit 2) when the
+/// mesh cannot have the asked eigenpairs (too small, zero mass), else a
+/// runtime failure.
+pub(crate) fn spectrum_failure(e: fmaps::eigensolve::Error, name: &str) -> Failure {
+    let code = match e {
+        fmaps::eigensolve::Error::InvalidK { .. }
+        | fmaps::eigensolve::Error::NonPositiveMass { .. }
+        | fmaps::eigensolve::Error::InvalidParameter(_) => 2,
+        _ => 1,
+    };
+    Failure(code, anyhow::Error::new(e).context(name.to_string()))
+}
+
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn spectrum(
     path: Option<&Path>,
@@ -44,12 +57,7 @@ pub(crate) fn spectrum(
     let spinner = Spinner::new(format!("{k} eigenpairs of {} vertices", mesh.n_vertices()));
     let s = fmaps::spectrum(&mesh, k, &params);
     drop(spinner);
-    let s = s.map_err(|e| match e {
-        fmaps::eigensolve::Error::InvalidK { .. }
-        | fmaps::eigensolve::Error::NonPositiveMass { .. }
-        | fmaps::eigensolve::Error::InvalidParameter(_) => input(e),
-        _ => runtime(e),
-    })?;
+    let s = s.map_err(|e| spectrum_failure(e, &name))?;
     let b = &s.basis;
     if let Some(files) = &files {
         write_basis(files, b)?;

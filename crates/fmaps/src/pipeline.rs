@@ -42,6 +42,10 @@ use nalgebra::DMatrix;
 
 use crate::{SpectrumParams, spectrum};
 
+mod guards;
+pub use guards::parse_starts;
+use guards::{check_determined, unit_area};
+
 /// Errors of the pipeline, naming the stage.
 #[derive(Debug, thiserror::Error)]
 #[non_exhaustive]
@@ -66,6 +70,31 @@ pub enum MatchError {
     /// A parameter is out of range.
     #[error("invalid parameter: {0}")]
     InvalidParameter(String),
+    /// The descriptors and operators do not determine the functional map:
+    /// the solve's C is orders of magnitude larger than any map between
+    /// the shapes can be.
+    #[error(
+        "the functional map is undetermined: max |C_ij| = {max_entry:.3e}, numerical rank {rank} of {k}, ||C^T C - I|| = {orthonormality:.3e}, where a map between the shapes has entries of order 1 and full rank; the descriptors do not tell the points of a shape apart (a sphere, a highly symmetric or featureless shape?). Try landmarks, another descriptor (HKS/WKS) or a smaller k"
+    )]
+    Undetermined {
+        /// The largest entry of C in magnitude.
+        max_entry: f64,
+        /// Singular values of C above 1e-8 of the largest.
+        rank: usize,
+        /// The size of C (columns).
+        k: usize,
+        /// ‖CᵀC − I‖_F.
+        orthonormality: f64,
+    },
+    /// A shape the pipeline cannot work on (zero or overflowing area, a
+    /// degenerate functional-map problem).
+    #[error("{shape} shape: {message}")]
+    InvalidShape {
+        /// Which shape ("source", "target", or "input" for one alone).
+        shape: &'static str,
+        /// What is wrong and what to try.
+        message: String,
+    },
 }
 
 /// The refinement stage of the pipeline.
@@ -356,16 +385,12 @@ pub fn prepare(mesh: &TriMesh, params: &MatchParams) -> Result<PreparedShape, Ma
     params.check()?;
     let t = Instant::now();
     let input_area = mesh.area();
-    let bad =
-        |e: fmaps_mesh_io::Error| MatchError::InvalidParameter(format!("area normalization: {e}"));
     let (normalized, scale) = if params.area_normalize {
-        if !(input_area.is_finite() && input_area > 0.0) {
-            return Err(MatchError::InvalidParameter(format!(
-                "the shape's area is {input_area}: it cannot be normalized (degenerate faces only?)"
-            )));
-        }
-        let scale = 1.0 / input_area.sqrt();
-        (Some(mesh.scaled(scale).map_err(bad)?), scale)
+        let (m, scale) = unit_area(mesh).map_err(|message| MatchError::InvalidShape {
+            shape: "input",
+            message,
+        })?;
+        (Some(m), scale)
     } else {
         (None, 1.0)
     };
@@ -478,6 +503,7 @@ pub fn match_shapes_with_progress(
     let spectra = t.elapsed().as_secs_f64();
     let name = |shape, e| match e {
         MatchError::Spectrum { source, .. } => MatchError::Spectrum { shape, source },
+        MatchError::InvalidShape { message, .. } => MatchError::InvalidShape { shape, message },
         e => e,
     };
     let pa = pa.map_err(|e| name("source", e))?;
@@ -593,6 +619,7 @@ pub fn match_prepared(
     let t = Instant::now();
     solve::normalize_weights(&mut energy, params.weights());
     let c_ba = energy.minimize()?;
+    check_determined(&c_ba, a.area, b.area)?;
     let energy_terms = energy.terms(&c_ba);
     let energy_value = energy.weighted_sum(&energy_terms);
     times.solve = t.elapsed().as_secs_f64();

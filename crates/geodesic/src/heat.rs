@@ -40,6 +40,43 @@ pub struct HeatSolver {
     /// Per face: the corner cotangents and edge vectors, for divergence.
     cot: Vec<[f64; 3]>,
     edges: Vec<[[f64; 3]; 3]>,
+    /// The connected component of each vertex (by faces; an unreferenced
+    /// vertex is a component of its own), and the number of components.
+    component: Vec<usize>,
+    n_components: usize,
+}
+
+/// Connected components of the vertices through the faces: a label per
+/// vertex (0-based, in order of first vertex) and their number.
+fn components(n: usize, faces: &[[usize; 3]]) -> (Vec<usize>, usize) {
+    fn find(parent: &mut [usize], mut x: usize) -> usize {
+        while parent[x] != x {
+            parent[x] = parent[parent[x]];
+            x = parent[x];
+        }
+        x
+    }
+    let mut parent: Vec<usize> = (0..n).collect();
+    for f in faces {
+        for k in 1..3 {
+            let (a, b) = (find(&mut parent, f[0]), find(&mut parent, f[k]));
+            if a != b {
+                parent[a.max(b)] = a.min(b);
+            }
+        }
+    }
+    let mut label = vec![usize::MAX; n];
+    let mut count = 0;
+    let mut out = vec![0; n];
+    for v in 0..n {
+        let r = find(&mut parent, v);
+        if label[r] == usize::MAX {
+            label[r] = count;
+            count += 1;
+        }
+        out[v] = label[r];
+    }
+    (out, count)
 }
 
 impl std::fmt::Debug for HeatSolver {
@@ -109,6 +146,7 @@ impl HeatSolver {
         let eps = 1e-8 * 4.0 * std::f64::consts::PI / total;
         let poisson = ShiftInvert::new(&problem, -eps, 1, Factorization::Auto)
             .map_err(|e| Error::Factorization(e.to_string()))?;
+        let (component, n_components) = components(mesh.n_vertices(), mesh.faces());
         Ok(Self {
             n: mesh.n_vertices(),
             heat,
@@ -117,6 +155,8 @@ impl HeatSolver {
             rot_edges,
             cot,
             edges,
+            component,
+            n_components,
         })
     }
 
@@ -158,8 +198,23 @@ impl HeatSolver {
         // L φ = −div.
         let mut phi: Vec<f64> = div.iter().map(|d| -d).collect();
         self.poisson.solve_in_place(&mut phi, 1);
-        let base = sources.iter().map(|&s| phi[s]).sum::<f64>() / sources.len() as f64;
-        phi.iter_mut().for_each(|p| *p = (*p - base).max(0.0));
+        // φ is defined up to a constant per connected component: each
+        // component's is fixed by its own sources (their mean is 0), and a
+        // component without a source is unreachable (infinite distance, as
+        // the exact solver and Dijkstra say).
+        let mut sum = vec![0.0; self.n_components];
+        let mut count = vec![0usize; self.n_components];
+        for &s in sources {
+            sum[self.component[s]] += phi[s];
+            count[self.component[s]] += 1;
+        }
+        for (p, &c) in phi.iter_mut().zip(&self.component) {
+            *p = if count[c] == 0 {
+                f64::INFINITY
+            } else {
+                (*p - sum[c] / count[c] as f64).max(0.0)
+            };
+        }
         phi
     }
 }

@@ -129,10 +129,42 @@ fn disconnected_meshes_give_infinity() {
     for solver in [
         Box::new(ExactSolver::new(&mesh).unwrap()) as Box<dyn DistanceSolver>,
         Box::new(DijkstraSolver::new(&mesh)),
+        Box::new(HeatSolver::new(&mesh, &HeatParams::default()).unwrap()),
     ] {
         let d = solver.distances(&[0]).unwrap();
-        assert!(d[..n].iter().all(|x| x.is_finite()));
-        assert!(d[n..].iter().all(|x| x.is_infinite() && !x.is_nan()));
+        assert!(d[..n].iter().all(|x| x.is_finite()), "{}", solver.name());
+        assert!(
+            d[n..].iter().all(|x| x.is_infinite() && !x.is_nan()),
+            "{}",
+            solver.name()
+        );
+    }
+    // Sources on both components: each component's distances are those of
+    // its own sources, as on the component alone (the heat method's
+    // per-component constant is fixed by the component's own sources).
+    let alone = HeatSolver::new(&s, &HeatParams::default()).unwrap();
+    let both = HeatSolver::new(&mesh, &HeatParams::default()).unwrap();
+    let d = both.distances(&[0, n + 5]).unwrap();
+    let (d0, d5) = (
+        alone.distances(&[0]).unwrap(),
+        alone.distances(&[5]).unwrap(),
+    );
+    for v in 0..n {
+        // Up to the Poisson shift (1e-8 of the first eigenvalue, set by the
+        // total area, which differs).
+        assert!(
+            (d[v] - d0[v]).abs() < 1e-6,
+            "vertex {v}: {} vs {}",
+            d[v],
+            d0[v]
+        );
+        assert!(
+            (d[n + v] - d5[v]).abs() < 1e-6,
+            "vertex {}: {} vs {}",
+            n + v,
+            d[n + v],
+            d5[v]
+        );
     }
 }
 

@@ -3,7 +3,6 @@
 //! Both are 1-based on disk and 0-based in memory; this module is the only
 //! place that converts.
 
-use std::fs;
 use std::io::{self, Write};
 use std::path::Path;
 
@@ -44,7 +43,7 @@ pub fn parse_index_list(data: &[u8], format: &'static str) -> Result<Vec<usize>>
 }
 
 fn read_list(path: &Path, format: &'static str) -> Result<Vec<usize>> {
-    let data = fs::read(path).map_err(|e| Error::io(path, e))?;
+    let data = crate::read_bounded(path, crate::MAX_INPUT_BYTES)?;
     parse_index_list(&data, format).map_err(|e| e.with_path(path))
 }
 
@@ -59,6 +58,82 @@ pub fn read_vts(path: impl AsRef<Path>) -> Result<Vec<usize>> {
 /// and B with [`check_indices`].
 pub fn read_map(path: impl AsRef<Path>) -> Result<Vec<usize>> {
     read_list(path.as_ref(), ".map")
+}
+
+/// Landmark pairs read from a file, with the line each came from.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct Landmarks {
+    /// `(source vertex, target vertex)`, 0-based.
+    pub pairs: Vec<(usize, usize)>,
+    /// The 1-based line of each pair.
+    pub lines: Vec<usize>,
+}
+
+impl Landmarks {
+    /// Checks every pair against the sizes of the two shapes; the error
+    /// names the line and the 1-based index as written (and `path`).
+    pub fn check(&self, n_source: usize, n_target: usize, path: Option<&Path>) -> Result<()> {
+        for (&(a, b), &line) in self.pairs.iter().zip(&self.lines) {
+            for (v, n) in [(a, n_source), (b, n_target)] {
+                if v >= n {
+                    return Err(Error::IndexOutOfRange {
+                        path: path.map(Path::to_path_buf),
+                        line,
+                        index: v.saturating_add(1),
+                        n_vertices: n,
+                    });
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Parses a landmark file: per line one pair `a b` of 1-based vertex
+/// indices (source, target), or one index used on both shapes. Blank lines
+/// and `#` comments are skipped; anything else is an error naming the line.
+pub fn parse_landmarks(data: &[u8]) -> Result<Landmarks> {
+    const FMT: &str = "landmarks";
+    let mut out = Landmarks::default();
+    for item in crate::text::content_lines(data, FMT) {
+        let (line, text) = item?;
+        let loc = Location::Line(line);
+        let parse = |tok: &str| -> Result<usize> {
+            match tok.parse::<u64>() {
+                Ok(v) if v >= 1 && usize::try_from(v).is_ok() => Ok(v as usize - 1),
+                _ => Err(parse_err(
+                    FMT,
+                    loc,
+                    format!("'{tok}' is not a 1-based vertex index"),
+                )),
+            }
+        };
+        let toks: Vec<&str> = text.split_ascii_whitespace().take(3).collect();
+        let pair = match toks.as_slice() {
+            [a] => {
+                let a = parse(a)?;
+                (a, a)
+            }
+            [a, b] => (parse(a)?, parse(b)?),
+            _ => {
+                return Err(parse_err(
+                    FMT,
+                    loc,
+                    "expected one or two vertex indices (source, target)",
+                ));
+            }
+        };
+        out.pairs.push(pair);
+        out.lines.push(line);
+    }
+    Ok(out)
+}
+
+/// Reads a landmark file (see [`parse_landmarks`]); errors name the file.
+pub fn read_landmarks(path: impl AsRef<Path>) -> Result<Landmarks> {
+    let path = path.as_ref();
+    let data = crate::read_bounded(path, crate::MAX_INPUT_BYTES)?;
+    parse_landmarks(&data).map_err(|e| e.with_path(path))
 }
 
 /// Checks that every 0-based index is below `n_vertices`; the error names

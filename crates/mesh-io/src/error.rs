@@ -45,6 +45,15 @@ pub enum Error {
         #[source]
         source: std::io::Error,
     },
+    /// The file is larger than this crate reads ([`crate::MAX_INPUT_BYTES`]),
+    /// or is a device or pipe that does not end within that many bytes.
+    #[error("{}: larger than {} bytes, the most fmaps reads from one input file (is it a device or a wrong file?)", path.display(), limit)]
+    TooLarge {
+        /// The file.
+        path: PathBuf,
+        /// The limit in bytes.
+        limit: u64,
+    },
     /// The file extension is not one of the supported formats.
     #[error("{}: unknown mesh format {}; expected .off, .obj or .ply", path.display(), ext.as_deref().map_or("(no extension)".to_string(), |e| format!("'.{e}'")))]
     UnknownFormat {

@@ -59,7 +59,8 @@ use std::fs;
 use std::path::Path;
 
 pub use corres::{
-    check_indices, parse_index_list, read_map, read_vts, write_index_list, write_map, write_vts,
+    Landmarks, check_indices, parse_index_list, parse_landmarks, read_landmarks, read_map,
+    read_vts, write_index_list, write_map, write_vts,
 };
 pub use error::{Error, Location, MeshProblem, Result};
 pub use obj::{parse_obj, write_obj};
@@ -268,12 +269,46 @@ pub fn parse_mesh(data: &[u8], format: Format) -> Result<TriMesh> {
     }
 }
 
+/// The most bytes read from one input file: 1 GiB, about 20 million
+/// vertices of ASCII OFF, far beyond what the pipeline can match on one
+/// machine. Larger files, and devices or pipes that do not end (such as
+/// `/dev/zero`), are refused with [`Error::TooLarge`] after reading at most
+/// this much.
+pub const MAX_INPUT_BYTES: u64 = (1 << 30) - 1;
+
+/// Reads a whole input file, at most `limit` bytes ([`MAX_INPUT_BYTES`] for
+/// every reader of this crate): a regular file larger than that is refused
+/// before reading, anything else (a pipe, a device) after reading `limit`
+/// bytes. Never allocates more than `limit` + 1 bytes.
+pub fn read_bounded(path: impl AsRef<Path>, limit: u64) -> Result<Vec<u8>> {
+    use std::io::Read;
+    let path = path.as_ref();
+    let file = fs::File::open(path).map_err(|e| Error::io(path, e))?;
+    let meta = file.metadata().map_err(|e| Error::io(path, e))?;
+    let too_large = || Error::TooLarge {
+        path: path.to_path_buf(),
+        limit,
+    };
+    if meta.is_file() && meta.len() > limit {
+        return Err(too_large());
+    }
+    let hint = if meta.is_file() { meta.len() } else { 0 };
+    let mut data = Vec::with_capacity(usize::try_from(hint.min(limit)).unwrap_or(0) + 1);
+    file.take(limit.saturating_add(1))
+        .read_to_end(&mut data)
+        .map_err(|e| Error::io(path, e))?;
+    if data.len() as u64 > limit {
+        return Err(too_large());
+    }
+    Ok(data)
+}
+
 /// Reads a mesh file, choosing the format from its extension
 /// (`.off`, `.obj`, `.ply`). Errors name the file.
 pub fn read_mesh(path: impl AsRef<Path>) -> Result<TriMesh> {
     let path = path.as_ref();
     let format = Format::from_path(path)?;
-    let data = fs::read(path).map_err(|e| Error::io(path, e))?;
+    let data = read_bounded(path, MAX_INPUT_BYTES)?;
     parse_mesh(&data, format).map_err(|e| e.with_path(path))
 }
 

@@ -14,8 +14,9 @@ const FMT: &str = "OFF";
 /// on the header line (`OFF 8 12 0`) or on the next line, the `C`, `N` and
 /// `ST` header variants (extra per-vertex columns such as colours, normals
 /// or texture coordinates are ignored, as are per-face colours after the
-/// indices), and polygons, which are fan-triangulated. Content after the
-/// declared faces is ignored.
+/// indices), and polygons, which are fan-triangulated. Each vertex and each
+/// face is on its own line; data after the declared faces is an error (a
+/// wrong face count), as is a file written on one line.
 ///
 /// Errors give the 1-based line: a missing or unsupported header, counts
 /// that are not numbers, a vertex with fewer than 3 coordinates or a
@@ -36,6 +37,16 @@ pub fn parse_off(data: &[u8]) -> Result<TriMesh> {
     } else {
         (hline, rest)
     };
+    if counts.len() > 3 {
+        return Err(parse_err(
+            FMT,
+            Location::Line(cline),
+            format!(
+                "{} values where the vertex, face and edge counts belong: OFF puts the counts, each vertex and each face on a line of its own",
+                counts.len()
+            ),
+        ));
+    }
     if counts.len() < 2 {
         return Err(parse_err(
             FMT,

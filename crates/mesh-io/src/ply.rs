@@ -279,6 +279,7 @@ pub fn parse_ply(data: &[u8]) -> Result<TriMesh> {
             reader.end_instance(&el.name, inst)?;
         }
     }
+    reader.finish(elements.len())?;
     TriMesh::new(vertices, faces)
 }
 
@@ -421,6 +422,9 @@ trait ValueReader {
     fn end_instance(&mut self, element: &str, inst: usize) -> Result<()>;
     fn read(&mut self, ty: Scalar) -> Result<f64>;
     fn location(&self) -> Location;
+    /// Errors if data other than whitespace follows the declared elements
+    /// (a wrong count in the header would otherwise drop faces silently).
+    fn finish(&mut self, n_elements: usize) -> Result<()>;
 
     fn read_count(&mut self, ty: Scalar) -> Result<usize> {
         let loc = self.location();
@@ -449,6 +453,24 @@ impl ValueReader for BinReader<'_> {
 
     fn location(&self) -> Location {
         Location::Byte(self.pos)
+    }
+
+    fn finish(&mut self, n_elements: usize) -> Result<()> {
+        let rest = &self.data[self.pos.min(self.data.len())..];
+        match rest
+            .iter()
+            .position(|b| !b.is_ascii_whitespace() && *b != 0)
+        {
+            None => Ok(()),
+            Some(_) => Err(parse_err(
+                FMT,
+                Location::Byte(self.pos),
+                format!(
+                    "{} more bytes after the {n_elements} elements the header declares (a wrong count?)",
+                    rest.len()
+                ),
+            )),
+        }
     }
 
     fn read(&mut self, ty: Scalar) -> Result<f64> {
@@ -538,6 +560,21 @@ impl ValueReader for AsciiReader<'_> {
 
     fn location(&self) -> Location {
         Location::Line(self.line)
+    }
+
+    fn finish(&mut self, n_elements: usize) -> Result<()> {
+        for (i, raw) in self.lines.by_ref() {
+            if raw.iter().any(|b| !b.is_ascii_whitespace()) {
+                return Err(parse_err(
+                    FMT,
+                    Location::Line(self.first_line + i),
+                    format!(
+                        "more data after the {n_elements} elements the header declares (a wrong count?)"
+                    ),
+                ));
+            }
+        }
+        Ok(())
     }
 
     fn read(&mut self, ty: Scalar) -> Result<f64> {

@@ -17,7 +17,7 @@ fn tet() -> TriMesh {
 
 /// Asserts a parse error at the given location whose message contains `needle`.
 #[track_caller]
-fn parse_error_at(r: Result<TriMesh>, want: Location, needle: &str) {
+fn parse_error_at<T: std::fmt::Debug>(r: Result<T>, want: Location, needle: &str) {
     match r {
         Err(Error::Parse {
             location, message, ..
@@ -520,4 +520,93 @@ fn bom_cr_only_and_extra_faces() {
     assert_eq!(parse_ply(&with_bom).unwrap(), tet());
     let map = b"\xEF\xBB\xBF3\n1\n2\n";
     assert_eq!(parse_index_list(map, ".map").unwrap(), vec![2, 0, 1]);
+}
+
+/// Data after the declared PLY elements is an error (a wrong count would
+/// drop faces silently); a whole OFF on one line says what is wrong.
+#[test]
+fn extra_ply_faces_and_one_line_off() {
+    let hdr = "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n";
+    let body = "0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n";
+    assert!(parse_ply(format!("{hdr}{body}\n  \n").as_bytes()).is_ok());
+    parse_error_at(
+        parse_ply(format!("{hdr}{body}3 0 2 1\n").as_bytes()),
+        Location::Line(14),
+        "more data after the 2 elements",
+    );
+    let mut bin = Vec::new();
+    write_ply(&mut bin, &tet()).unwrap();
+    let n = bin.len();
+    bin.extend_from_slice(&[3, 0, 0, 0, 0]);
+    parse_error_at(
+        parse_ply(&bin),
+        Location::Byte(n),
+        "5 more bytes after the 2 elements",
+    );
+    parse_error_at(
+        parse_off(b"OFF 3 1 0 0 0 0 1 0 0 0 1 0 3 0 1 2\n"),
+        Location::Line(1),
+        "on a line of its own",
+    );
+}
+
+/// Inputs are read up to a bound: a regular file over it is refused before
+/// reading, a device that never ends after the bound.
+#[test]
+fn reads_are_bounded() {
+    let dir = std::env::temp_dir().join(format!("fmaps-bounded-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let p = dir.join("big.off");
+    std::fs::write(&p, vec![b' '; 5000]).unwrap();
+    assert!(matches!(
+        read_bounded(&p, 4999),
+        Err(Error::TooLarge { limit: 4999, .. })
+    ));
+    assert_eq!(read_bounded(&p, 5000).unwrap().len(), 5000);
+    let zero = std::path::Path::new("/dev/zero");
+    if zero.exists() {
+        let e = read_bounded(zero, 1 << 20).unwrap_err();
+        assert!(
+            e.to_string()
+                .contains("/dev/zero: larger than 1048576 bytes"),
+            "{e}"
+        );
+    } else {
+        eprintln!("note: no /dev/zero here; the device case was skipped");
+    }
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// Landmark files: pairs or single indices, 1-based, errors with the line;
+/// out-of-range pairs named by line and 1-based index.
+#[test]
+fn landmark_files() {
+    let l = parse_landmarks(b"# a comment\n1 2\n\n5\n").unwrap();
+    assert_eq!(l.pairs, vec![(0, 1), (4, 4)]);
+    assert_eq!(l.lines, vec![2, 4]);
+    parse_error_at(
+        parse_landmarks(b"1 2\n0\n"),
+        Location::Line(2),
+        "'0' is not a 1-based",
+    );
+    parse_error_at(
+        parse_landmarks(b"1 2 3\n"),
+        Location::Line(1),
+        "one or two vertex indices",
+    );
+    parse_error_at(parse_landmarks(b"x\n"), Location::Line(1), "'x'");
+    let e = l.check(5, 4, None).unwrap_err();
+    assert!(
+        matches!(
+            e,
+            Error::IndexOutOfRange {
+                line: 4,
+                index: 5,
+                n_vertices: 4,
+                ..
+            }
+        ),
+        "{e}"
+    );
+    assert!(l.check(5, 5, None).is_ok());
 }

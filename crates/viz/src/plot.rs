@@ -127,30 +127,41 @@ pub fn line_plot(plot: &Plot<'_>, series: &[Series]) -> Image {
 /// dark (>= `vmax`), positive in red and negative in blue, with a title
 /// and the matrix size. One square cell per entry, scaled to ~560 px.
 pub fn heatmap(title: &str, m: &nalgebra::DMatrix<f64>, vmax: f64) -> Image {
+    const BOX: usize = 540;
     let (rows, cols) = m.shape();
-    let cell = (540 / rows.max(cols).max(1)).max(1);
-    let (x0, y0) = ((W - cell * cols) / 2, TOP + 10);
+    let big = rows.max(cols).max(1);
+    // Whole pixels per entry up to 540 entries; beyond, several entries
+    // share a pixel (each pixel shows the entry at its top-left corner).
+    let (w, h) = if big <= BOX {
+        let cell = BOX / big;
+        (cell * cols, cell * rows)
+    } else {
+        (cols * BOX / big, rows * BOX / big)
+    };
+    let (x0, y0) = ((W - w) / 2, TOP + 10);
     let mut cv = Image::new(W, H, WHITE);
     let black = BLACK;
     cv.text(x0 as i64, 20, title, 2, black);
-    for i in 0..rows {
-        for j in 0..cols {
+    for py in 0..h {
+        let i = py * rows / h.max(1);
+        for px in 0..w {
+            let j = px * cols / w.max(1);
             let v = m[(i, j)];
-            let t = (v.abs() / vmax).min(1.0);
+            let t = if v.is_nan() {
+                0.0
+            } else {
+                (v.abs() / vmax).min(1.0)
+            };
             let fade = |full: u8| (255.0 - t * (255.0 - f64::from(full))).round() as u8;
             let c = if v >= 0.0 {
                 [fade(178), fade(24), fade(43)]
             } else {
                 [fade(33), fade(102), fade(172)]
             };
-            for dy in 0..cell {
-                for dx in 0..cell {
-                    cv.set((x0 + j * cell + dx) as i64, (y0 + i * cell + dy) as i64, c);
-                }
-            }
+            cv.set((x0 + px) as i64, (y0 + py) as i64, c);
         }
     }
-    let (bx, by) = (x0 as i64, (y0 + rows * cell + 14) as i64);
+    let (bx, by) = (x0 as i64, (y0 + h + 14) as i64);
     cv.text(
         bx,
         by,
