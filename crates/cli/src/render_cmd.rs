@@ -696,6 +696,13 @@ fn read_values(path: &Path, n: usize) -> Result<Vec<f64>, Failure> {
     for (i, line) in text.lines().enumerate() {
         let s = line.trim();
         if !s.is_empty() {
+            if v.len() == n {
+                return Err(input(anyhow::anyhow!(
+                    "{}:{}: more values than the mesh's {n} vertices (one per line)",
+                    path.display(),
+                    i + 1
+                )));
+            }
             v.push(parse_number(s, path, i + 1)?);
         }
     }

@@ -218,3 +218,45 @@ fn match_on_too_small_meshes_is_bad_input_said_once() {
     );
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// A clean blob matched onto a clean icosphere: the sphere's descriptors
+/// are constant, C is undetermined. Exit 1 with the reason and what to
+/// try, the old output kept (issue 19, item 1).
+#[test]
+fn an_undetermined_functional_map_is_refused() {
+    use fmaps::mesh_io::generate::icosphere;
+    let dir = tmpdir("undetermined");
+    let s = icosphere(1.0, 3);
+    let (v, f) = s.clone().into_parts();
+    let blob: Vec<[f64; 3]> = v
+        .iter()
+        .map(|p| {
+            let bump = 1.0 + 0.3 * (-4.0 * ((p[0] - 0.6).powi(2) + (p[1] - 0.5).powi(2))).exp();
+            [1.3 * p[0] * bump, p[1] * bump, 0.8 * p[2]]
+        })
+        .collect();
+    let blob = fmaps::mesh_io::TriMesh::new(blob, f).unwrap();
+    fmaps::mesh_io::write_mesh(dir.join("blob.off"), &blob).unwrap();
+    fmaps::mesh_io::write_mesh(dir.join("sphere.off"), &s).unwrap();
+    std::fs::write(dir.join("keep.map"), "old\n").unwrap();
+    for (a, b) in [("blob.off", "sphere.off"), ("sphere.off", "blob.off")] {
+        let out = fmaps()
+            .current_dir(&dir)
+            .args(["match", a, b, "--k", "10", "--k-process", "20"])
+            .args(["--out", "keep.map", "--save-fmap", "C.txt"])
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(1), "{a} -> {b}: {err}");
+        assert!(
+            err.contains("undetermined") && err.contains("Try landmarks"),
+            "{err}"
+        );
+        assert_eq!(
+            std::fs::read_to_string(dir.join("keep.map")).unwrap(),
+            "old\n"
+        );
+        assert!(!dir.join("C.txt").exists());
+    }
+    std::fs::remove_dir_all(&dir).ok();
+}

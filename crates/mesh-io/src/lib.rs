@@ -269,12 +269,13 @@ pub fn parse_mesh(data: &[u8], format: Format) -> Result<TriMesh> {
     }
 }
 
-/// The most bytes read from one input file: 1 GiB, about 20 million
-/// vertices of ASCII OFF, far beyond what the pipeline can match on one
-/// machine. Larger files, and devices or pipes that do not end (such as
-/// `/dev/zero`), are refused with [`Error::TooLarge`] after reading at most
-/// this much.
-pub const MAX_INPUT_BYTES: u64 = (1 << 30) - 1;
+/// The most bytes read from one input file: 256 MiB, about 5 million
+/// vertices of ASCII OFF or 10 million of binary PLY, beyond what the
+/// pipeline matches on one machine, and small enough that the parsed mesh
+/// (a few times the file at most) stays well within memory. Larger files,
+/// and devices or pipes that do not end (such as `/dev/zero`), are refused
+/// with [`Error::TooLarge`] after reading at most this much.
+pub const MAX_INPUT_BYTES: u64 = (1 << 28) - 1;
 
 /// Reads a whole input file, at most `limit` bytes ([`MAX_INPUT_BYTES`] for
 /// every reader of this crate): a regular file larger than that is refused
