@@ -300,3 +300,57 @@ fn an_undetermined_map_is_an_error() {
     }
     assert!(match_shapes(&a, &a, &p).is_ok());
 }
+
+/// `refine_point_map`: a map from elsewhere, refined. The true map of the
+/// built-in pair stays (nearly) itself under ZoomOut, and the true map with
+/// a fifth of its vertices sent to random places is repaired: ZoomOut
+/// restores almost all of them (it smooths: a random target is far from its
+/// neighbours' images).
+#[test]
+fn refining_a_given_map() {
+    use fmaps::pipeline::{prepare, refine_point_map};
+    let pair = fmaps::mesh_io::generate::creature_pair(3);
+    let params = MatchParams {
+        k: 30,
+        k_process: 60,
+        k_descr: 60,
+        refine: Refinement::zoomout(30, 60, 5),
+        ..MatchParams::default()
+    };
+    let pa = prepare(&pair.source, &params).unwrap();
+    let pb = prepare(&pair.target, &params).unwrap();
+    let n = pair.truth.len();
+    let wrong = |t: &[usize]| t.iter().zip(&pair.truth).filter(|(x, y)| x != y).count();
+    let r = refine_point_map(&pa, &pb, &pair.truth, &params).unwrap();
+    assert!(
+        wrong(&r.t_ab) * 50 < n,
+        "{} of {n} moved off the truth",
+        wrong(&r.t_ab)
+    );
+    assert_eq!(r.t_ab_init, pair.truth);
+    assert_eq!(r.c_ba.ncols(), 60);
+    let mut noisy = pair.truth.clone();
+    let mut x = 12345u64;
+    for v in noisy.iter_mut().step_by(5) {
+        x = x
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        *v = (x >> 33) as usize % n;
+    }
+    let before = wrong(&noisy);
+    let r = refine_point_map(&pa, &pb, &noisy, &params).unwrap();
+    let after = wrong(&r.t_ab);
+    assert!(after * 5 < before, "{before} wrong before, {after} after");
+    // No refinement: the given map back, with its pull-back.
+    let none = MatchParams {
+        refine: Refinement::None,
+        ..params.clone()
+    };
+    let r = refine_point_map(&pa, &pb, &noisy, &none).unwrap();
+    assert_eq!(r.t_ab, noisy);
+    assert_eq!(r.c_ba.shape(), (30, 30));
+    assert!(matches!(
+        refine_point_map(&pa, &pb, &noisy[1..], &params),
+        Err(MatchError::InvalidParameter(_))
+    ));
+}

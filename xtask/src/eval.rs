@@ -50,6 +50,12 @@ enum MapSource {
     /// `fmaps-init`, `fmaps-icp`, `fmaps-zoomout[:START:FINAL:STEP][@..]`:
     /// the fmaps pipeline, run here.
     Pipeline(Box<PipelineCache>),
+    /// `REFINER@PUBLISHED` (`zoomout`, `zoomout:START:FINAL:STEP`, `icp`):
+    /// a refiner run here from the dataset's published maps.
+    Refined {
+        published: fmaps::eval::PublishedMaps,
+        cache: Box<PipelineCache>,
+    },
     /// pyFM's maps from `pyfm_pipeline.py` with its per-pair timings.
     PyFm {
         dir: PathBuf,
@@ -79,6 +85,29 @@ impl MapSource {
                 },
                 shapes: HashMap::new(),
             })));
+        }
+        if let Some((refiner, published)) = method.split_once('@')
+            && !method.starts_with("fmaps-")
+        {
+            let refine = refiner_method(refiner)?;
+            let k = match &refine {
+                fmaps::pipeline::Refinement::ZoomOut { zoomout, .. } => zoomout.k_start,
+                _ => fmaps::MatchParams::default().k,
+            };
+            let k_process = k.max(refine.k_needed());
+            return Ok(MapSource::Refined {
+                published: c.published_maps(published)?,
+                cache: Box::new(PipelineCache {
+                    params: fmaps::MatchParams {
+                        k,
+                        k_process,
+                        k_descr: fmaps::MatchParams::default().k_descr.min(k_process),
+                        refine,
+                        ..fmaps::MatchParams::default()
+                    },
+                    shapes: HashMap::new(),
+                }),
+            });
         }
         if let Some(stage) = method.strip_prefix("pyfm:") {
             let base = root().join(peer_dir).join(format!("pyfm-{}", c.name()));
@@ -115,6 +144,23 @@ impl MapSource {
                 }
                 let t = fmaps::mesh_io::read_map(&path)?;
                 Ok(Some((t, seconds.get(&(a.into(), b.into())).copied(), Null)))
+            }
+            MapSource::Refined { published, cache } => {
+                let Some(init) = published.read(a, b)? else {
+                    return Ok(None);
+                };
+                let t = Instant::now();
+                cache.prepare(c, meshes, &[a, b])?;
+                let r = fmaps::pipeline::refine_point_map(
+                    &cache.shapes[a],
+                    &cache.shapes[b],
+                    &init,
+                    &cache.params,
+                )
+                .with_context(|| format!("{} {a} -> {b}", c.name()))?;
+                let info =
+                    json!({"orientation": r.orientation, "orientation_init": r.orientation_init});
+                Ok(Some((r.t_ab, Some(t.elapsed().as_secs_f64()), info)))
             }
             MapSource::Pipeline(cache) => {
                 let t = Instant::now();
@@ -181,6 +227,7 @@ fn pipeline_method(method: &str) -> anyhow::Result<Option<PipelineMethod>> {
             "fmaps-init" => Refinement::None,
             "fmaps-icp" => Refinement::Icp(fmaps::refine::Icp::default()),
             "fmaps-zoomout" => Refinement::default_zoomout(),
+            "fmaps-bijective-zoomout" | "fmaps-discrete" => refiner_method(&method[6..])?,
             m => match m.strip_prefix("fmaps-zoomout:") {
                 Some(spec) => Refinement::ZoomOut {
                     zoomout: fmaps::refine::ZoomOut::with_schedule(spec)
@@ -193,6 +240,50 @@ fn pipeline_method(method: &str) -> anyhow::Result<Option<PipelineMethod>> {
         starts,
         restart_below,
     )))
+}
+
+impl PipelineCache {
+    /// Prepares (eigenbases) the shapes not prepared yet.
+    fn prepare(
+        &mut self,
+        c: &Collection,
+        meshes: &HashMap<String, TriMesh>,
+        names: &[&str],
+    ) -> anyhow::Result<()> {
+        for &s in names {
+            if !self.shapes.contains_key(s) {
+                let p = fmaps::pipeline::prepare(&meshes[s], &self.params)
+                    .with_context(|| format!("{} {s}", c.name()))?;
+                self.shapes.insert(s.to_string(), p);
+            }
+        }
+        Ok(())
+    }
+}
+
+/// The refiner of a `REFINER@PUBLISHED` method: `zoomout` (50 -> 150
+/// step 5), `zoomout:START:FINAL:STEP`, `icp` (10 iterations at k = 50),
+/// `bijective-zoomout` or `discrete` (discrete optimisation presets, 50 ->
+/// 150 step 5).
+fn refiner_method(refiner: &str) -> anyhow::Result<fmaps::pipeline::Refinement> {
+    use fmaps::pipeline::Refinement;
+    Ok(match refiner {
+        "zoomout" => Refinement::default_zoomout(),
+        "icp" => Refinement::Icp(fmaps::refine::Icp::default()),
+        "bijective-zoomout" | "discrete" => Refinement::Custom(std::sync::Arc::new(
+            fmaps::refine::DiscreteOp::preset(refiner)?,
+        )),
+        r => match r.strip_prefix("zoomout:") {
+            Some(spec) => Refinement::ZoomOut {
+                zoomout: fmaps::refine::ZoomOut::with_schedule(spec)
+                    .with_context(|| format!("method {r}@.."))?,
+                samples: None,
+            },
+            None => bail!(
+                "unknown refiner '{r}' in {r}@..: expected zoomout, zoomout:START:FINAL:STEP or icp"
+            ),
+        },
+    })
 }
 
 /// The refinement, the extra starts and the restart bar of a pipeline method.

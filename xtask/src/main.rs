@@ -40,7 +40,7 @@ struct Cli {
 enum Command {
     /// Benchmark the Laplacian and the eigensolvers against SciPy.
     Bench(bench::Args),
-    /// The benchmark table over test pairs (published maps, fmaps-init, fmaps-icp, fmaps-zoomout[:START:FINAL:STEP], pyfm:<stage>).
+    /// The benchmark table over test pairs (published maps, fmaps-init, fmaps-icp, fmaps-zoomout[:START:FINAL:STEP], REFINER@PUBLISHED such as zoomout@WKSini_symm, pyfm:<stage>).
     Eval(eval::Args),
     /// Compare HKS/WKS with pyFM's (needs the Python peers).
     DescriptorCheck(descriptor_check::Args),

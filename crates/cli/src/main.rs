@@ -18,6 +18,7 @@ mod geodesic;
 mod info;
 mod match_cmd;
 mod outputs;
+mod refine_cmd;
 mod render_cmd;
 mod spectrum;
 
@@ -74,6 +75,14 @@ Defaults are the literature's automatic pipeline (pyFM's): 200 eigenpairs, 100 W
 a 50 x 50 map, weights descr 0.1, lap 1e-3 (resolvent mask), dcomm 1, orientation 1."
     )]
     Match(MatchArgs),
+    /// Refine a point map from elsewhere (another tool, a learned method,
+    /// a published benchmark map) with ICP or ZoomOut.
+    #[command(after_help = "Examples:\n  \
+fmaps refine A.off B.off --init-map A_B_init.map --out A_B.map\n  \
+fmaps refine A.off B.off --init-map A_B_init.map --refine zoomout --zoomout 30:200:1 --k 30 --json\n\n\
+The map's functional map is its pull-back between the eigenbases (--k x --k); the refinement\n\
+starts there, so the quality of an initial map and of a refiner can be measured apart.")]
+    Refine(refine_cmd::RefineArgs),
     /// Pictures as PNG (and coloured PLY for MeshLab): colour or texture
     /// transfer through a map, its error heat map, a functional-map
     /// matrix, a spectral embedding, any per-vertex scalar field.
@@ -307,6 +316,7 @@ fn main() -> ExitCode {
         } => demo::run(&out, subdivisions, json),
         Command::Info { mesh, json } => info(&mesh, json),
         Command::Match(args) => match_cmd(&args),
+        Command::Refine(args) => refine_cmd::refine_cmd(&args),
         Command::Geodesic {
             mesh,
             source,

@@ -94,6 +94,47 @@ pub(crate) enum RefineKind {
     Icp,
     /// ZoomOut spectral upsampling.
     Zoomout,
+    /// Bijective ZoomOut (Ren et al., "Discrete Optimization for Shape
+    /// Matching", SGP 2021): both point maps updated together, each
+    /// pulled towards the other's inverse; schedule from --zoomout.
+    BijectiveZoomout,
+    /// The discrete solver of the same paper on orthogonality,
+    /// bijectivity, properness and Laplacian commutativity (equal
+    /// weights); schedule from --zoomout.
+    Discrete,
+}
+
+impl RefineKind {
+    /// The discrete-optimisation preset of this kind, if it is one.
+    pub(crate) fn discrete_preset(self) -> Option<&'static str> {
+        match self {
+            RefineKind::BijectiveZoomout => Some("bijective-zoomout"),
+            RefineKind::Discrete => Some("discrete"),
+            _ => None,
+        }
+    }
+}
+
+/// A discrete-optimisation preset on the schedule `zoomout` (START:FINAL:
+/// STEP, default 50:150:5), refused when it starts beyond the map's `k`.
+pub(crate) fn discrete_refinement(
+    preset: &str,
+    zoomout: Option<&str>,
+    k: usize,
+) -> Result<fmaps::pipeline::Refinement, Failure> {
+    let mut d = fmaps::refine::DiscreteOp::preset(preset).map_err(input)?;
+    if let Some(text) = zoomout {
+        let z =
+            ZoomOut::with_schedule(text).map_err(|e| input(anyhow::anyhow!("--zoomout: {e}")))?;
+        (d.k_start, d.k_final, d.step) = (z.k_start, z.k_final, z.step);
+    }
+    if d.k_start > k {
+        return Err(input(anyhow::anyhow!(
+            "--zoomout starts at {}, but the initial map is only {k} x {k} (--k {k})",
+            d.k_start
+        )));
+    }
+    Ok(fmaps::pipeline::Refinement::Custom(std::sync::Arc::new(d)))
 }
 
 pub(crate) fn read_landmarks(path: &Path) -> Result<mesh_io::Landmarks, Failure> {
@@ -109,13 +150,16 @@ pub(crate) fn refinement(args: &MatchArgs) -> Result<fmaps::pipeline::Refinement
         (None, None) => RefineKind::None,
     };
     let bad = |m: String| Err(input(anyhow::anyhow!(m)));
+    if let Some(preset) = kind.discrete_preset() {
+        return discrete_refinement(preset, args.zoomout.as_deref(), args.k);
+    }
     Ok(match kind {
         RefineKind::None => Refinement::None,
         RefineKind::Icp => Refinement::Icp(Icp {
             max_iterations: args.icp_iterations,
             adjoint: args.adjoint,
         }),
-        RefineKind::Zoomout => {
+        RefineKind::Zoomout | RefineKind::BijectiveZoomout | RefineKind::Discrete => {
             let schedule = match &args.zoomout {
                 None => ZoomOut::default(),
                 Some(text) => ZoomOut::with_schedule(text)
@@ -253,6 +297,7 @@ pub(crate) fn match_cmd(args: &MatchArgs) -> Result<(), Failure> {
         staged.stage(path, |tmp| Ok(std::fs::write(tmp, text)?))?;
     }
     staged.commit()?;
+    let quality = fmaps::eval::map_quality(&r.t_ab, &a, &b, None).map_err(runtime)?;
     let total = t.elapsed().as_secs_f64();
     if args.json {
         let v = json!({
@@ -274,6 +319,7 @@ pub(crate) fn match_cmd(args: &MatchArgs) -> Result<(), Failure> {
                 "changed_per_iteration": rep.iterations.iter().map(|i| i.changed).collect::<Vec<_>>(),
             })),
             "orientation": r.orientation,
+            "quality": quality,
             "starts": r.starts,
             "changed_by_refinement": r.t_ab.iter().zip(&r.t_ab_init).filter(|(x, y)| x != y).count(),
             "energy": r.energy,
@@ -332,6 +378,14 @@ pub(crate) fn match_cmd(args: &MatchArgs) -> Result<(), Failure> {
         o,
         "orientation score of the map: {:.3} (1: preserved, -1: mirrored)",
         r.orientation
+    );
+    outln!(
+        o,
+        "map quality (no ground truth): coverage {:.3}, collapsed faces {:.3}, area distortion {:.3}, conformal distortion {:.3}",
+        quality.coverage,
+        quality.collapsed_faces,
+        quality.area_distortion,
+        quality.conformal_distortion
     );
     for s in &r.starts {
         outln!(

@@ -557,3 +557,68 @@ fn render_subcommands_write_pictures_and_report_checked_numbers() {
     assert!(failure(&["error", "--source", &p("g.off")]).contains("--target"));
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// `fmaps refine`: a given map (the built-in pair's truth with every fifth
+/// vertex sent elsewhere) is repaired by ZoomOut; a map of the wrong length
+/// is bad input naming the file; the map file cannot be the output.
+#[test]
+fn refine_repairs_a_given_map() {
+    let dir = tmpdir("refine");
+    let pair = fmaps::mesh_io::generate::creature_pair(3);
+    fmaps::mesh_io::write_mesh(dir.join("a.off"), &pair.source).unwrap();
+    fmaps::mesh_io::write_mesh(dir.join("b.off"), &pair.target).unwrap();
+    let n = pair.truth.len();
+    let noisy: Vec<usize> = pair
+        .truth
+        .iter()
+        .enumerate()
+        .map(|(i, &t)| if i % 5 == 0 { (t + 97) % n } else { t })
+        .collect();
+    fmaps::mesh_io::write_map(dir.join("init.map"), &noisy).unwrap();
+    fmaps::mesh_io::write_map(dir.join("short.map"), &noisy[1..]).unwrap();
+    let v = json_of(fmaps().current_dir(&dir).args([
+        "refine",
+        "a.off",
+        "b.off",
+        "--init-map",
+        "init.map",
+        "--k",
+        "30",
+        "--zoomout",
+        "30:60:5",
+        "--out",
+        "r.map",
+        "--json",
+    ]));
+    assert_eq!(v["refine"]["final_k"], 60);
+    let wrong = |t: &[usize]| t.iter().zip(&pair.truth).filter(|(x, y)| x != y).count();
+    let r = fmaps::mesh_io::read_map(dir.join("r.map")).unwrap();
+    assert!(
+        wrong(&r) * 5 < wrong(&noisy),
+        "{} wrong before, {} after",
+        wrong(&noisy),
+        wrong(&r)
+    );
+    for (args, says) in [
+        (vec!["--init-map", "short.map"], "short.map"),
+        (
+            vec!["--init-map", "init.map", "--out", "init.map"],
+            "overwrite",
+        ),
+        (
+            vec!["--init-map", "init.map", "--k", "20"],
+            "--zoomout starts at 50",
+        ),
+    ] {
+        let out = fmaps()
+            .current_dir(&dir)
+            .args(["refine", "a.off", "b.off"])
+            .args(&args)
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{args:?}: {err}");
+        assert!(err.contains(says), "{args:?}: {err}");
+    }
+    std::fs::remove_dir_all(&dir).ok();
+}

@@ -251,7 +251,7 @@ fn through_every_subcommand(dir: &Path, name: &str) -> Vec<(String, i32)> {
     // eval may reject the map or ground truth for the mesh's size.
     let eval_culprits = format!("{name}|id.map|g.vts");
     let mut go = |label: &str, args: Vec<&str>, outs: &[&str]| {
-        let culprit = if label == "eval" {
+        let culprit = if label == "eval" || label == "refine-target" {
             &eval_culprits
         } else {
             name
@@ -310,6 +310,23 @@ fn through_every_subcommand(dir: &Path, name: &str) -> Vec<(String, i32)> {
             "g.vts",
         ],
         &[],
+    );
+    go(
+        "refine-target",
+        vec![
+            "refine",
+            "good.off",
+            name,
+            "--init-map",
+            "id.map",
+            "--k",
+            "5",
+            "--zoomout",
+            "5:8:1",
+            "--out",
+            "o.map",
+        ],
+        &["o.map"],
     );
     go(
         "render-embedding",

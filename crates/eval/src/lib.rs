@@ -34,6 +34,7 @@
 #![forbid(unsafe_code)]
 
 mod dataset;
+pub mod quality;
 
 use std::collections::HashMap;
 use std::time::Instant;
@@ -43,6 +44,7 @@ use fmaps_mesh_io::TriMesh;
 use rayon::prelude::*;
 
 pub use dataset::{Collection, PublishedMaps};
+pub use quality::{MapQuality, map_quality};
 
 /// Errors of this crate.
 #[derive(Debug, thiserror::Error)]

@@ -42,7 +42,10 @@ use nalgebra::DMatrix;
 
 use crate::{SpectrumParams, spectrum};
 
+mod from_map;
 mod guards;
+use from_map::with_refiner;
+pub use from_map::{RefinedMap, refine_point_map};
 pub use guards::parse_starts;
 use guards::{check_determined, unit_area};
 
@@ -645,25 +648,10 @@ pub fn match_prepared(
         energy: energy_value,
         times,
     };
-    match &params.refine {
-        Refinement::None => {}
-        Refinement::Icp(icp) => {
-            let icp = refine::Icp {
-                adjoint: icp.adjoint || params.adjoint,
-                ..*icp
-            };
-            refine_result(&mut out, a, b, &icp)?;
-        }
-        Refinement::ZoomOut { zoomout, samples } => {
-            let mut zo = zoomout.clone();
-            zo.adjoint |= params.adjoint;
-            zo.subsample = samples.map(|m| refine::Subsample {
-                a: refine::farthest_point_sampling(&b.vertices, m, 0),
-                b: refine::farthest_point_sampling(&a.vertices, m, 0),
-            });
-            refine_result(&mut out, a, b, &zo)?;
-        }
-        Refinement::Custom(r) => refine_result(&mut out, a, b, r.as_ref())?,
+    if let Some(r) = with_refiner(&params.refine, params.adjoint, a, b, |r| {
+        refine_result(&mut out, a, b, r)
+    }) {
+        r?;
     }
     out.orientation = orientation_of(&out.t_ab, a, b)?;
     Ok(out)

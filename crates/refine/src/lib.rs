@@ -13,9 +13,14 @@
 //!   shape correspondence", SIGGRAPH Asia 2019): the same alternation while
 //!   the basis grows from k_start to k_final by `step`; with the common
 //!   options (adjoint conversion, sub-sampled iterations as in the paper's
-//!   fast variant, a bijective variant that refines both directions).
+//!   fast variant, a variant that averages both directions' maps).
+//! - [`DiscreteOp`] (Ren, Melzi, Wonka, Ovsjanikov, "Discrete Optimization
+//!   for Shape Matching", SGP 2021): functional-map energies (properness,
+//!   bijectivity, orthogonality, Laplacian commutativity) minimised over
+//!   pairs of point maps by nearest-neighbour searches in concatenated
+//!   embeddings; its presets include the paper's bijective ZoomOut.
 //!
-//! Both implement [`Refiner`], so a pipeline swaps one for the other (or
+//! All implement [`Refiner`], so a pipeline swaps one for the other (or
 //! for its own) through a trait object. Every nearest-neighbour search is
 //! exact ([`fmaps_nn::nearest_rows`]), so the results are deterministic
 //! and independent of the thread count.
@@ -35,12 +40,22 @@
 //! assert_eq!(out.c_ab.shape(), (40, 40));
 //! assert!(out.t_ba.iter().enumerate().all(|(y, &x)| x == y));
 //! println!("{}", out.report);
+//!
+//! // Bijective ZoomOut on the same schedule: also the identity.
+//! let bij = fmaps_refine::DiscreteOp {
+//!     k_start: 10,
+//!     k_final: 40,
+//!     step: 5,
+//!     ..fmaps_refine::DiscreteOp::preset("bijective-zoomout")?
+//! };
+//! assert!(bij.refine(&c, &basis, &basis)?.t_ba.iter().enumerate().all(|(y, &x)| x == y));
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
 #![deny(missing_docs)]
 #![forbid(unsafe_code)]
 
 pub mod conformance;
+mod discrete;
 mod icp;
 mod orientation;
 mod sampling;
@@ -51,6 +66,7 @@ use std::fmt;
 use fmaps_eigensolve::SpectralBasis;
 use nalgebra::DMatrix;
 
+pub use discrete::{DiscreteOp, DiscreteWeights};
 pub use icp::Icp;
 pub use orientation::orientation_score;
 pub use sampling::farthest_point_sampling;

@@ -413,3 +413,87 @@ fn refiners_pass_the_exported_conformance_check() {
     let e = conformance::check(&OffByOne(zo(false, false))).unwrap_err();
     assert_eq!(e.check, "identity self-map", "{e}");
 }
+
+fn discrete(preset: &str, k_start: usize, k_final: usize, step: usize) -> fmaps_refine::DiscreteOp {
+    fmaps_refine::DiscreteOp {
+        k_start,
+        k_final,
+        step,
+        ..fmaps_refine::DiscreteOp::preset(preset).unwrap()
+    }
+}
+
+/// Discrete optimisation: the `zoomout` preset (orthogonality term only)
+/// is ZoomOut and the coupling term alone is ZoomOut with the adjoint
+/// conversion, computed independently (own embeddings and searches);
+/// the exact map is a fixed point of every preset; bijective ZoomOut
+/// returns maps that are much closer to inverse to each other on a noisy
+/// start, and every preset reduces the error of the noisy map.
+#[test]
+fn discrete_optimisation_presets() {
+    let p = pair(60, true);
+    let c = noisy(&true_fmap(&p, 20), 0.15, 7);
+    let zo = ZoomOut {
+        k_start: 20,
+        k_final: 60,
+        step: 4,
+        ..ZoomOut::default()
+    }
+    .refine(&c, &p.basis_a, &p.basis_b)
+    .unwrap();
+    let dz = discrete("zoomout", 20, 60, 4)
+        .refine(&c, &p.basis_a, &p.basis_b)
+        .unwrap();
+    assert_eq!(zo.t_ba, dz.t_ba);
+    assert_eq!(dz.c_ab.shape(), (60, 60));
+    let adjoint = ZoomOut {
+        k_start: 20,
+        k_final: 60,
+        step: 4,
+        adjoint: true,
+        ..ZoomOut::default()
+    }
+    .refine(&c, &p.basis_a, &p.basis_b)
+    .unwrap();
+    let coupling = fmaps_refine::DiscreteOp {
+        weights: fmaps_refine::DiscreteWeights {
+            coupling: 1.0,
+            bijectivity: 0.0,
+            orthogonality: 0.0,
+            laplacian: 0.0,
+        },
+        ..discrete("zoomout", 20, 60, 4)
+    };
+    let dc = coupling.refine(&c, &p.basis_a, &p.basis_b).unwrap();
+    assert_eq!(adjoint.t_ba, dc.t_ba);
+    assert_eq!(dz.report.iterations.len(), 10);
+    // Two searches per size plus the two first conversions.
+    assert_eq!(dz.report.nn_searches, 22);
+
+    let exact = pair(60, false);
+    let c_exact = true_fmap(&exact, 60);
+    for preset in ["zoomout", "bijective-zoomout", "discrete"] {
+        let r = discrete(preset, 20, 60, 4)
+            .refine(&c_exact, &exact.basis_a, &exact.basis_b)
+            .unwrap();
+        assert_eq!(r.t_ba, exact.t_ba, "{preset}");
+    }
+
+    let before = error(
+        &p,
+        &point_map_from_fmap(&c, &p.basis_a, &p.basis_b).unwrap(),
+    );
+    for preset in ["bijective-zoomout", "discrete"] {
+        let r = discrete(preset, 20, 60, 4)
+            .refine(&c, &p.basis_a, &p.basis_b)
+            .unwrap();
+        let e = error(&p, &r.t_ba);
+        assert!(e < 0.5 * before, "{preset}: before {before}, after {e}");
+    }
+    assert!(fmaps_refine::DiscreteOp::preset("nope").is_err());
+    let bad = fmaps_refine::DiscreteOp {
+        inner: 0,
+        ..discrete("discrete", 20, 60, 4)
+    };
+    assert!(bad.refine(&c, &p.basis_a, &p.basis_b).is_err());
+}

@@ -9,7 +9,7 @@ use super::MatchError;
 
 /// Parses the command line's multi-start list: `none` (a single start) or
 /// sizes `K1,K2,..` (each at least 1; spaces around commas allowed) for
-/// [`MatchParams::starts`].
+/// [`MatchParams::starts`](super::MatchParams::starts).
 ///
 /// ```
 /// use fmaps::pipeline::parse_starts;

@@ -1,0 +1,245 @@
+//! `fmaps refine`: refine a point map from elsewhere.
+
+use super::*;
+
+use fmaps::pipeline::{MatchParams, Refinement};
+use fmaps::refine::{Icp, ZoomOut};
+
+use crate::match_cmd::RefineKind;
+
+/// Options of `fmaps refine`.
+#[derive(clap::Args)]
+pub(crate) struct RefineArgs {
+    /// Source mesh A (.off, .obj, .ply).
+    source: PathBuf,
+    /// Target mesh B.
+    target: PathBuf,
+    /// The map to refine, A -> B: one 1-based B vertex per A vertex (.map),
+    /// from any tool.
+    #[arg(long)]
+    init_map: PathBuf,
+    /// The refinement.
+    #[arg(long, value_enum, default_value_t = RefineKind::Zoomout)]
+    refine: RefineKind,
+    /// Size of the map's functional map (k x k) that the refinement starts
+    /// from (ZoomOut: at least START).
+    #[arg(long, short = 'k', default_value_t = MatchParams::default().k)]
+    k: usize,
+    /// ZoomOut schedule START:FINAL:STEP (default 50:150:5).
+    #[arg(long, value_name = "START:FINAL:STEP")]
+    zoomout: Option<String>,
+    /// ICP iterations (stops earlier at a fixed point).
+    #[arg(long, default_value_t = Icp::default().max_iterations)]
+    icp_iterations: usize,
+    /// Run the ZoomOut iterations on this many farthest points per shape.
+    #[arg(long)]
+    refine_samples: Option<usize>,
+    /// Bijective ZoomOut: refine both directions together.
+    #[arg(long)]
+    bijective: bool,
+    /// Convert maps with the adjoint of C.
+    #[arg(long)]
+    adjoint: bool,
+    /// Keep the meshes' own units (no scaling to unit area).
+    #[arg(long)]
+    no_area_normalize: bool,
+    /// Output map T: A -> B (.map, 1-based).
+    #[arg(long)]
+    out: Option<PathBuf>,
+    /// Write the refined C_BA as text.
+    #[arg(long)]
+    save_fmap: Option<PathBuf>,
+    /// Print one JSON object.
+    #[arg(long)]
+    json: bool,
+}
+
+fn refinement(args: &RefineArgs) -> Result<Refinement, Failure> {
+    if let Some(preset) = args.refine.discrete_preset() {
+        return crate::match_cmd::discrete_refinement(preset, args.zoomout.as_deref(), args.k);
+    }
+    Ok(match args.refine {
+        RefineKind::None => Refinement::None,
+        RefineKind::Icp => Refinement::Icp(Icp {
+            max_iterations: args.icp_iterations,
+            adjoint: args.adjoint,
+        }),
+        RefineKind::Zoomout | RefineKind::BijectiveZoomout | RefineKind::Discrete => {
+            let mut z = match &args.zoomout {
+                None => ZoomOut::default(),
+                Some(text) => ZoomOut::with_schedule(text)
+                    .map_err(|e| input(anyhow::anyhow!("--zoomout: {e}")))?,
+            };
+            if z.k_start > args.k {
+                return Err(input(anyhow::anyhow!(
+                    "--zoomout starts at {}, but the map's C is only {k} x {k} (--k {k})",
+                    z.k_start,
+                    k = args.k
+                )));
+            }
+            z.adjoint = args.adjoint;
+            z.bijective = args.bijective;
+            Refinement::ZoomOut {
+                zoomout: z,
+                samples: args.refine_samples,
+            }
+        }
+    })
+}
+
+pub(crate) fn refine_cmd(args: &RefineArgs) -> Result<(), Failure> {
+    use fmaps::pipeline::{prepare, refine_point_map};
+    let outs: Vec<&Path> = [&args.out, &args.save_fmap]
+        .into_iter()
+        .flatten()
+        .map(PathBuf::as_path)
+        .collect();
+    crate::outputs::check_outputs(&[&args.source, &args.target, &args.init_map], &outs)?;
+    let t = Instant::now();
+    let a = load(&args.source)?;
+    let b = load(&args.target)?;
+    let t_ab = read_indices(&args.init_map, b.n_vertices(), false)?;
+    if t_ab.len() != a.n_vertices() {
+        return Err(input(anyhow::anyhow!(
+            "{}: {} lines, but {} has {} vertices (one target per source vertex)",
+            args.init_map.display(),
+            t_ab.len(),
+            args.source.display(),
+            a.n_vertices()
+        )));
+    }
+    let refine = refinement(args)?;
+    let mut params = MatchParams {
+        k: args.k,
+        refine,
+        adjoint: args.adjoint,
+        area_normalize: !args.no_area_normalize,
+        ..MatchParams::default()
+    };
+    params.k_process = args.k.max(params.refine.k_needed());
+    // No descriptors are computed; keep their size within the basis.
+    params.k_descr = params.k_descr.min(params.k_process);
+    if params.k == 0 {
+        return Err(input(anyhow::anyhow!(
+            "--k 0: the map needs at least one basis function"
+        )));
+    }
+    let spinner = Spinner::new("eigenbases of both shapes");
+    let mut single = params.clone();
+    single.spectrum.threads = 1;
+    let (pa, pb) = rayon::join(|| prepare(&a, &single), || prepare(&b, &single));
+    let shape_failure = |e: fmaps::pipeline::MatchError, path: &Path| {
+        use fmaps::pipeline::MatchError;
+        let code = match e {
+            MatchError::InvalidShape { .. }
+            | MatchError::InvalidParameter(_)
+            | MatchError::Spectrum {
+                source:
+                    fmaps::eigensolve::Error::InvalidK { .. }
+                    | fmaps::eigensolve::Error::NonPositiveMass { .. }
+                    | fmaps::eigensolve::Error::InvalidParameter(_),
+                ..
+            } => 2,
+            _ => 1,
+        };
+        Failure(
+            code,
+            anyhow::Error::new(e).context(path.display().to_string()),
+        )
+    };
+    let pa = pa.map_err(|e| shape_failure(e, &args.source))?;
+    let pb = pb.map_err(|e| shape_failure(e, &args.target))?;
+    let spectra = t.elapsed().as_secs_f64();
+    spinner.stage("refinement");
+    let r = refine_point_map(&pa, &pb, &t_ab, &params).map_err(runtime)?;
+    drop(spinner);
+    let mut staged = crate::outputs::Staged::default();
+    if let Some(out) = &args.out {
+        staged.stage(out, |tmp| Ok(mesh_io::write_map(tmp, &r.t_ab)?))?;
+    }
+    if let Some(path) = &args.save_fmap {
+        let mut text = String::new();
+        for row in r.c_ba.row_iter() {
+            let cells: Vec<String> = row.iter().map(|v| format!("{v:.17e}")).collect();
+            outln!(text, "{}", cells.join(" "));
+        }
+        staged.stage(path, |tmp| Ok(std::fs::write(tmp, text)?))?;
+    }
+    staged.commit()?;
+    let quality = fmaps::eval::map_quality(&r.t_ab, &a, &b, None).map_err(runtime)?;
+    let quality_init = fmaps::eval::map_quality(&r.t_ab_init, &a, &b, None).map_err(runtime)?;
+    let changed = r
+        .t_ab
+        .iter()
+        .zip(&r.t_ab_init)
+        .filter(|(x, y)| x != y)
+        .count();
+    let total = t.elapsed().as_secs_f64();
+    if args.json {
+        let v = json!({
+            "source": args.source.display().to_string(),
+            "target": args.target.display().to_string(),
+            "init_map": args.init_map.display().to_string(),
+            "n_source": a.n_vertices(), "n_target": b.n_vertices(), "k": args.k,
+            "area_normalized": params.area_normalize,
+            "out": args.out.as_ref().map(|p| p.display().to_string()),
+            "seconds": {"load_and_spectra": spectra, "refine": r.seconds, "total": total},
+            "refine": r.refine.as_ref().map(|rep| json!({
+                "method": rep.method, "iterations": rep.iterations.len(),
+                "converged": rep.converged, "nn_searches": rep.nn_searches,
+                "final_k": r.c_ba.ncols(),
+            })),
+            "orientation_init": r.orientation_init,
+            "orientation": r.orientation,
+            "quality_init": quality_init,
+            "quality": quality,
+            "changed_by_refinement": changed,
+            "init_orthonormality": r.metrics_init.orthonormality,
+            "init_laplacian_commutativity": r.metrics_init.laplacian_commutativity,
+        });
+        return emit(&format!("{v}\n"));
+    }
+    let mut o = String::new();
+    outln!(
+        o,
+        "{} ({} vertices) -> {} ({} vertices): map from {}",
+        args.source.display(),
+        a.n_vertices(),
+        args.target.display(),
+        b.n_vertices(),
+        args.init_map.display()
+    );
+    outln!(o, "  eigenbases       {spectra:>8.3} s");
+    outln!(o, "  refinement       {:>8.3} s", r.seconds);
+    if let Some(rep) = &r.refine {
+        outln!(
+            o,
+            "{}: {} iterations, final k = {}; {changed} of {} vertices moved",
+            rep.method,
+            rep.iterations.len(),
+            r.c_ba.ncols(),
+            a.n_vertices()
+        );
+    }
+    outln!(
+        o,
+        "orientation score {:.3} -> {:.3} (1: preserved, -1: mirrored)",
+        r.orientation_init,
+        r.orientation
+    );
+    for (name, q) in [("given", quality_init), ("refined", quality)] {
+        outln!(
+            o,
+            "{name:>8} map: coverage {:.3}, collapsed faces {:.3}, area distortion {:.3}, conformal distortion {:.3}",
+            q.coverage,
+            q.collapsed_faces,
+            q.area_distortion,
+            q.conformal_distortion
+        );
+    }
+    match &args.out {
+        Some(p) => outln!(o, "wrote {}", p.display()),
+        None => outln!(o, "(no --out: map not written)"),
+    }
+    emit(&o)
+}
