@@ -354,3 +354,41 @@ fn refining_a_given_map() {
         Err(MatchError::InvalidParameter(_))
     ));
 }
+
+/// Multi-start runs a custom refiner from each initial size when it says
+/// how (`Refiner::for_initial_size`): bijective ZoomOut from 20 and 10.
+#[test]
+fn multi_start_with_a_discrete_refiner() {
+    use std::sync::Arc;
+    let pair = fmaps::mesh_io::generate::creature_pair(3);
+    let d = fmaps::refine::DiscreteOp {
+        k_start: 20,
+        k_final: 40,
+        step: 5,
+        ..fmaps::refine::DiscreteOp::preset("bijective-zoomout").unwrap()
+    };
+    let params = MatchParams {
+        k: 20,
+        k_process: 40,
+        k_descr: 40,
+        n_descr: 40,
+        refine: Refinement::Custom(Arc::new(d)),
+        starts: vec![10],
+        ..MatchParams::default()
+    };
+    let r = match_shapes(&pair.source, &pair.target, &params).unwrap();
+    assert_eq!(r.starts.len(), 2);
+    assert_eq!(r.starts.iter().filter(|s| s.chosen).count(), 1);
+    assert_eq!(r.c_ba.shape(), (40, 40));
+    let wrong = r
+        .t_ab
+        .iter()
+        .zip(&pair.truth)
+        .filter(|(x, y)| x != y)
+        .count();
+    assert!(
+        wrong * 10 < pair.truth.len(),
+        "{wrong} of {} wrong",
+        pair.truth.len()
+    );
+}

@@ -19,12 +19,22 @@ use crate::util::{bcicp_dir, collections_or_default, root};
 /// Options of `cargo xtask eval`.
 #[derive(clap::Args)]
 pub struct Args {
-    /// Collections to evaluate (default: FAUST and TOSCA_Isometric).
+    /// Collections to evaluate (default: FAUST and TOSCA_Isometric); also
+    /// the FAUST splits `FAUST_r` (tr_reg_080..099, all 190 pairs) and
+    /// `FAUST_inter` (the test pairs of two different people).
     #[arg(long = "collection")]
     collections: Vec<String>,
-    /// Only the first N test pairs (default: all).
+    /// Only the first N test pairs (default: all; after --offset/--stride).
     #[arg(long)]
     pairs: Option<usize>,
+    /// Start at the pair of this 0-based index (with --stride: a regular
+    /// subset, e.g. `--offset 6 --stride 15` for lines 7, 22, 37, ... of
+    /// test_pairs.txt).
+    #[arg(long, default_value_t = 0)]
+    offset: usize,
+    /// Take every STRIDE-th pair from --offset.
+    #[arg(long, default_value_t = 1)]
+    stride: usize,
     /// Methods (default: every published method found in maps/).
     #[arg(long = "method")]
     methods: Vec<String>,
@@ -280,7 +290,7 @@ fn refiner_method(refiner: &str) -> anyhow::Result<fmaps::pipeline::Refinement> 
                 samples: None,
             },
             None => bail!(
-                "unknown refiner '{r}' in {r}@..: expected zoomout, zoomout:START:FINAL:STEP or icp"
+                "unknown refiner '{r}' in {r}@..: expected zoomout, zoomout:START:FINAL:STEP, icp, bijective-zoomout or discrete"
             ),
         },
     })
@@ -326,6 +336,45 @@ fn pyfm_seconds(
     Ok(out)
 }
 
+/// A collection and its pairs: a dataset collection with its
+/// `test_pairs.txt`, or one of the literature's splits of FAUST:
+/// `FAUST_r` (shapes tr_reg_080 .. tr_reg_099, all 190 unordered pairs,
+/// lower number first) and `FAUST_inter` (the test pairs of two different
+/// people: `tr_reg_0SP`, S the person).
+fn collection_pairs(
+    bcicp: &std::path::Path,
+    name: &str,
+) -> anyhow::Result<(Collection, Vec<(String, String)>)> {
+    match name {
+        "FAUST_r" => {
+            let c = Collection::open(bcicp, "FAUST")?;
+            let shapes: Vec<String> = (80..100).map(|i| format!("tr_reg_{i:03}")).collect();
+            let mut pairs = Vec::new();
+            for (i, a) in shapes.iter().enumerate() {
+                for b in &shapes[i + 1..] {
+                    pairs.push((a.clone(), b.clone()));
+                }
+            }
+            Ok((c, pairs))
+        }
+        "FAUST_inter" => {
+            let c = Collection::open(bcicp, "FAUST")?;
+            let person = |s: &str| s.strip_prefix("tr_reg_").and_then(|n| n.chars().nth(1));
+            let pairs = c
+                .test_pairs()?
+                .into_iter()
+                .filter(|(a, b)| person(a) != person(b))
+                .collect();
+            Ok((c, pairs))
+        }
+        _ => {
+            let c = Collection::open(bcicp, name)?;
+            let pairs = c.test_pairs()?;
+            Ok((c, pairs))
+        }
+    }
+}
+
 pub fn eval(args: &Args) -> anyhow::Result<()> {
     let bcicp = bcicp_dir(args.data.as_deref())?;
     let collections = collections_or_default(&args.collections);
@@ -337,8 +386,12 @@ pub fn eval(args: &Args) -> anyhow::Result<()> {
         .build()?;
     let mut rows = Vec::new();
     for cname in &collections {
-        let c = Collection::open(&bcicp, cname)?;
-        let mut pairs = c.test_pairs()?;
+        let (c, pairs) = collection_pairs(&bcicp, cname)?;
+        let mut pairs: Vec<(String, String)> = pairs
+            .into_iter()
+            .skip(args.offset)
+            .step_by(args.stride.max(1))
+            .collect();
         if let Some(n) = args.pairs {
             pairs.truncate(n);
         }

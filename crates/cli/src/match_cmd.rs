@@ -63,8 +63,9 @@ pub(crate) struct MatchArgs {
     adjoint: bool,
     /// Multi-start: also run from initial maps of these sizes and keep
     /// the final map whose orientation is best preserved; `none` for a
-    /// single start. Default: `20,30` with --refine zoomout (measured:
-    /// fewer left/right swaps, see README), none otherwise.
+    /// single start. Default: `20,30` with --refine zoomout,
+    /// bijective-zoomout or discrete (measured: fewer left/right swaps,
+    /// see README), none otherwise.
     #[arg(long, value_name = "K1,K2,..|none")]
     starts: Option<String>,
     /// With several starts: try the further starts only when the first
@@ -209,7 +210,9 @@ pub(crate) fn params_of(args: &MatchArgs) -> Result<MatchParams, Failure> {
         Some(text) => fmaps::pipeline::parse_starts(text)
             .map_err(|e| input(anyhow::anyhow!("--starts {e}")))?,
         // The default further starts, those the computed basis allows.
-        None if matches!(params.refine, fmaps::pipeline::Refinement::ZoomOut { .. }) => {
+        None if matches!(params.refine, fmaps::pipeline::Refinement::ZoomOut { .. })
+            || args.refine.is_some_and(|k| k.discrete_preset().is_some()) =>
+        {
             let k_process = params.k_process.max(params.refine.k_needed());
             fmaps::pipeline::ZOOMOUT_STARTS
                 .into_iter()

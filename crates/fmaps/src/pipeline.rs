@@ -687,8 +687,14 @@ fn multi_start(
             starts: Vec::new(),
             ..params.clone()
         };
-        if let Refinement::ZoomOut { zoomout, .. } = &mut p.refine {
-            zoomout.k_start = zoomout.k_start.min(k);
+        match &mut p.refine {
+            Refinement::ZoomOut { zoomout, .. } => zoomout.k_start = zoomout.k_start.min(k),
+            Refinement::Custom(r) => {
+                if let Some(r) = r.for_initial_size(k) {
+                    p.refine = Refinement::Custom(Arc::from(r));
+                }
+            }
+            _ => {}
         }
         match_prepared(a, b, &p)
     };

@@ -139,8 +139,9 @@ impl DiscreteOp {
                 k = self.k_start
             )));
         }
-        check_k(a, "A", self.k_final)?;
-        check_k(b, "B", self.k_final)
+        // A map wider than a basis refers to functions that do not exist.
+        check_k(a, "A", self.k_final.max(c_ab.ncols()))?;
+        check_k(b, "B", self.k_final.max(c_ab.nrows()))
     }
 }
 
@@ -236,6 +237,13 @@ impl Refiner for DiscreteOp {
 
     fn k_needed(&self) -> usize {
         self.k_final
+    }
+
+    fn for_initial_size(&self, k: usize) -> Option<Box<dyn Refiner>> {
+        Some(Box::new(DiscreteOp {
+            k_start: self.k_start.min(k),
+            ..self.clone()
+        }))
     }
 
     fn refine(

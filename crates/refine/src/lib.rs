@@ -216,6 +216,16 @@ pub trait Refiner: Send + Sync {
     fn k_needed(&self) -> usize {
         0
     }
+
+    /// The same refiner for an initial map of size `k` when it reads a
+    /// leading block of its input (ZoomOut and discrete optimisation start
+    /// from `min(k_start, k)`), so that a pipeline can run it from initial
+    /// maps of several sizes. Default `None`: the refiner takes any size
+    /// as it is.
+    fn for_initial_size(&self, k: usize) -> Option<Box<dyn Refiner>> {
+        let _ = k;
+        None
+    }
 }
 
 fn check_k(basis: &SpectralBasis, shape: &'static str, needed: usize) -> Result<()> {

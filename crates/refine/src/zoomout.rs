@@ -208,6 +208,13 @@ impl Refiner for ZoomOut {
         self.k_final
     }
 
+    fn for_initial_size(&self, k: usize) -> Option<Box<dyn Refiner>> {
+        Some(Box::new(ZoomOut {
+            k_start: self.k_start.min(k),
+            ..self.clone()
+        }))
+    }
+
     fn name(&self) -> String {
         let mut s = format!("zoomout {}:{}:{}", self.k_start, self.k_final, self.step);
         if self.adjoint {

@@ -384,6 +384,8 @@ fn refiners_pass_the_exported_conformance_check() {
         Box::new(zo(false, false)),
         Box::new(zo(true, false)),
         Box::new(zo(false, true)),
+        Box::new(discrete("bijective-zoomout", 20, 50, 5)),
+        Box::new(discrete("discrete", 20, 50, 5)),
     ];
     for r in &refiners {
         conformance::check(r.as_ref()).unwrap_or_else(|e| panic!("{e}"));
