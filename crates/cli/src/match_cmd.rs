@@ -231,6 +231,33 @@ pub(crate) fn params_of(args: &MatchArgs) -> Result<MatchParams, Failure> {
     Ok(params)
 }
 
+/// A pipeline error as a failure: bad input (exit 2) for parameters the
+/// meshes cannot satisfy and meshes the pipeline cannot use, as in `fmaps
+/// spectrum`; else a runtime failure. `file`: the mesh it is about.
+pub(crate) fn match_failure(e: fmaps::pipeline::MatchError, file: Option<&Path>) -> Failure {
+    use fmaps::pipeline::MatchError;
+    let code = match e {
+        MatchError::InvalidParameter(_)
+        | MatchError::InvalidShape { .. }
+        | MatchError::Spectrum {
+            source:
+                fmaps::eigensolve::Error::InvalidK { .. }
+                | fmaps::eigensolve::Error::NonPositiveMass { .. }
+                | fmaps::eigensolve::Error::InvalidParameter(_),
+            ..
+        } => 2,
+        _ => 1,
+    };
+    let e = anyhow::Error::new(e);
+    Failure(
+        code,
+        match file {
+            Some(p) => e.context(p.display().to_string()),
+            None => e,
+        },
+    )
+}
+
 pub(crate) fn match_cmd(args: &MatchArgs) -> Result<(), Failure> {
     use fmaps::pipeline::{MatchError, match_shapes_with_progress};
     let outs: Vec<&Path> = [&args.out, &args.save_fmap]
@@ -256,50 +283,22 @@ pub(crate) fn match_cmd(args: &MatchArgs) -> Result<(), Failure> {
         let file = match &e {
             MatchError::Spectrum { shape, .. } | MatchError::InvalidShape { shape, .. } => {
                 Some(if *shape == "target" {
-                    &args.target
+                    args.target.as_path()
                 } else {
-                    &args.source
+                    args.source.as_path()
                 })
             }
             _ => None,
         };
-        // Parameters the meshes cannot satisfy are bad input, as in
-        // `fmaps spectrum`.
-        let code = match e {
-            MatchError::InvalidParameter(_)
-            | MatchError::InvalidShape { .. }
-            | MatchError::Spectrum {
-                source:
-                    fmaps::eigensolve::Error::InvalidK { .. }
-                    | fmaps::eigensolve::Error::NonPositiveMass { .. }
-                    | fmaps::eigensolve::Error::InvalidParameter(_),
-                ..
-            } => 2,
-            _ => 1,
-        };
-        let e = anyhow::Error::new(e);
-        Failure(
-            code,
-            match file {
-                Some(p) => e.context(p.display().to_string()),
-                None => e,
-            },
-        )
+        match_failure(e, file)
     })?;
     drop(spinner);
-    let mut staged = crate::outputs::Staged::default();
-    if let Some(out) = &args.out {
-        staged.stage(out, |tmp| Ok(mesh_io::write_map(tmp, &r.t_ab)?))?;
-    }
-    if let Some(path) = &args.save_fmap {
-        let mut text = String::new();
-        for row in r.c_ba.row_iter() {
-            let cells: Vec<String> = row.iter().map(|v| format!("{v:.17e}")).collect();
-            outln!(text, "{}", cells.join(" "));
-        }
-        staged.stage(path, |tmp| Ok(std::fs::write(tmp, text)?))?;
-    }
-    staged.commit()?;
+    crate::outputs::write_map_outputs(
+        args.out.as_deref(),
+        args.save_fmap.as_deref(),
+        &r.t_ab,
+        &r.c_ba,
+    )?;
     let quality = fmaps::eval::map_quality(&r.t_ab, &a, &b, None).map_err(runtime)?;
     let total = t.elapsed().as_secs_f64();
     if args.json {

@@ -90,3 +90,27 @@ impl Drop for Staged {
         }
     }
 }
+
+/// The outputs of `match` and `refine`, written together: the point map
+/// (`.map`, 1-based) and C as text (one row per line, 17 significant
+/// digits).
+pub(crate) fn write_map_outputs(
+    out: Option<&Path>,
+    save_fmap: Option<&Path>,
+    t_ab: &[usize],
+    c: &nalgebra::DMatrix<f64>,
+) -> Result<(), Failure> {
+    let mut staged = Staged::default();
+    if let Some(out) = out {
+        staged.stage(out, |tmp| Ok(mesh_io::write_map(tmp, t_ab)?))?;
+    }
+    if let Some(path) = save_fmap {
+        let mut text = String::new();
+        for row in c.row_iter() {
+            let cells: Vec<String> = row.iter().map(|v| format!("{v:.17e}")).collect();
+            outln!(text, "{}", cells.join(" "));
+        }
+        staged.stage(path, |tmp| Ok(std::fs::write(tmp, text)?))?;
+    }
+    staged.commit()
+}

@@ -5,7 +5,7 @@ use super::*;
 use fmaps::pipeline::{MatchParams, Refinement};
 use fmaps::refine::{Icp, ZoomOut};
 
-use crate::match_cmd::RefineKind;
+use crate::match_cmd::{RefineKind, match_failure};
 
 /// Options of `fmaps refine`.
 #[derive(clap::Args)]
@@ -128,44 +128,18 @@ pub(crate) fn refine_cmd(args: &RefineArgs) -> Result<(), Failure> {
     let mut single = params.clone();
     single.spectrum.threads = 1;
     let (pa, pb) = rayon::join(|| prepare(&a, &single), || prepare(&b, &single));
-    let shape_failure = |e: fmaps::pipeline::MatchError, path: &Path| {
-        use fmaps::pipeline::MatchError;
-        let code = match e {
-            MatchError::InvalidShape { .. }
-            | MatchError::InvalidParameter(_)
-            | MatchError::Spectrum {
-                source:
-                    fmaps::eigensolve::Error::InvalidK { .. }
-                    | fmaps::eigensolve::Error::NonPositiveMass { .. }
-                    | fmaps::eigensolve::Error::InvalidParameter(_),
-                ..
-            } => 2,
-            _ => 1,
-        };
-        Failure(
-            code,
-            anyhow::Error::new(e).context(path.display().to_string()),
-        )
-    };
-    let pa = pa.map_err(|e| shape_failure(e, &args.source))?;
-    let pb = pb.map_err(|e| shape_failure(e, &args.target))?;
+    let pa = pa.map_err(|e| match_failure(e, Some(&args.source)))?;
+    let pb = pb.map_err(|e| match_failure(e, Some(&args.target)))?;
     let spectra = t.elapsed().as_secs_f64();
     spinner.stage("refinement");
     let r = refine_point_map(&pa, &pb, &t_ab, &params).map_err(runtime)?;
     drop(spinner);
-    let mut staged = crate::outputs::Staged::default();
-    if let Some(out) = &args.out {
-        staged.stage(out, |tmp| Ok(mesh_io::write_map(tmp, &r.t_ab)?))?;
-    }
-    if let Some(path) = &args.save_fmap {
-        let mut text = String::new();
-        for row in r.c_ba.row_iter() {
-            let cells: Vec<String> = row.iter().map(|v| format!("{v:.17e}")).collect();
-            outln!(text, "{}", cells.join(" "));
-        }
-        staged.stage(path, |tmp| Ok(std::fs::write(tmp, text)?))?;
-    }
-    staged.commit()?;
+    crate::outputs::write_map_outputs(
+        args.out.as_deref(),
+        args.save_fmap.as_deref(),
+        &r.t_ab,
+        &r.c_ba,
+    )?;
     let quality = fmaps::eval::map_quality(&r.t_ab, &a, &b, None).map_err(runtime)?;
     let quality_init = fmaps::eval::map_quality(&r.t_ab_init, &a, &b, None).map_err(runtime)?;
     let changed = r

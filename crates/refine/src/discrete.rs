@@ -106,17 +106,6 @@ impl DiscreteOp {
         })
     }
 
-    /// The sizes after the start (as [`crate::ZoomOut::schedule`]).
-    fn schedule(&self) -> Vec<usize> {
-        let mut out = Vec::new();
-        let mut k = self.k_start;
-        while k < self.k_final {
-            k = k.saturating_add(self.step.max(1)).min(self.k_final);
-            out.push(k);
-        }
-        out
-    }
-
     fn check(&self, c_ab: &DMatrix<f64>, a: &SpectralBasis, b: &SpectralBasis) -> Result<()> {
         if self.k_start == 0 || self.k_final < self.k_start || self.inner == 0 {
             return Err(Error::InvalidParameter(format!(
@@ -298,7 +287,7 @@ impl Refiner for DiscreteOp {
         let mut t_ab = search(&d, &q, None)?;
         // As in ZoomOut: each size fits both Cs to the current point maps
         // and updates the maps; the start size only converts.
-        for k in self.schedule() {
+        for k in crate::growth_schedule(self.k_start, self.k_final, self.step) {
             for _ in 0..self.inner {
                 let ti = Instant::now();
                 // Both Cs from the current point maps (the proper maps).

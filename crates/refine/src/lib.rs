@@ -228,6 +228,18 @@ pub trait Refiner: Send + Sync {
     }
 }
 
+/// The sizes a growing map takes after `k_start`: `k_start + step, ...,
+/// k_final` (the last step clamped; a step of 0 counts as 1).
+pub(crate) fn growth_schedule(k_start: usize, k_final: usize, step: usize) -> Vec<usize> {
+    let mut out = Vec::new();
+    let mut k = k_start;
+    while k < k_final {
+        k = k.saturating_add(step.max(1)).min(k_final);
+        out.push(k);
+    }
+    out
+}
+
 fn check_k(basis: &SpectralBasis, shape: &'static str, needed: usize) -> Result<()> {
     if basis.k() < needed {
         return Err(Error::NotEnoughEigenpairs {

@@ -67,13 +67,7 @@ impl ZoomOut {
     /// The sizes C takes, after the start: `k_start + step, ...,
     /// k_final`.
     pub fn schedule(&self) -> Vec<usize> {
-        let mut out = Vec::new();
-        let mut k = self.k_start;
-        while k < self.k_final {
-            k = k.saturating_add(self.step.max(1)).min(self.k_final);
-            out.push(k);
-        }
-        out
+        crate::growth_schedule(self.k_start, self.k_final, self.step)
     }
 
     /// The default ZoomOut with the schedule `START:FINAL:STEP` (the
