@@ -21,7 +21,10 @@ use crate::util::{bcicp_dir, collections_or_default, root};
 pub struct Args {
     /// Collections to evaluate (default: FAUST and TOSCA_Isometric); also
     /// the FAUST splits `FAUST_r` (tr_reg_080..099, all 190 pairs) and
-    /// `FAUST_inter` (the test pairs of two different people).
+    /// `FAUST_inter` (the test pairs of two different people); and the
+    /// generated bodies (`cargo xtask generate`, built on demand):
+    /// `generated-iso` (one individual, two poses) and `generated-noniso`
+    /// (two individuals of different proportions).
     #[arg(long = "collection")]
     collections: Vec<String>,
     /// Only the first N test pairs (default: all; after --offset/--stride).
@@ -84,6 +87,30 @@ struct PipelineCache {
 
 impl MapSource {
     fn open(c: &Collection, method: &str, peer_dir: &std::path::Path) -> anyhow::Result<MapSource> {
+        // `METHOD+sinkhorn`: the refiner converts with the Fast Sinkhorn
+        // Filter.
+        let (method, sinkhorn) = match method.split_once("+sinkhorn") {
+            Some((head, tail)) => (format!("{head}{tail}"), true),
+            None => (method.to_string(), false),
+        };
+        let method = method.as_str();
+        let mut source = MapSource::open_nn(c, method, peer_dir)?;
+        if sinkhorn {
+            match &mut source {
+                MapSource::Pipeline(cache) | MapSource::Refined { cache, .. } => {
+                    cache.params.refine = with_sinkhorn(&cache.params.refine, method)?;
+                }
+                _ => bail!("+sinkhorn applies to fmaps pipeline methods and REFINER@PUBLISHED"),
+            }
+        }
+        Ok(source)
+    }
+
+    fn open_nn(
+        c: &Collection,
+        method: &str,
+        peer_dir: &std::path::Path,
+    ) -> anyhow::Result<MapSource> {
         if let Some((refine, starts, restart_below)) = pipeline_method(method)? {
             return Ok(MapSource::Pipeline(Box::new(PipelineCache {
                 params: fmaps::MatchParams {
@@ -296,6 +323,39 @@ fn refiner_method(refiner: &str) -> anyhow::Result<fmaps::pipeline::Refinement> 
     })
 }
 
+/// The same refinement converting with the Fast Sinkhorn Filter.
+fn with_sinkhorn(
+    r: &fmaps::pipeline::Refinement,
+    method: &str,
+) -> anyhow::Result<fmaps::pipeline::Refinement> {
+    use fmaps::pipeline::Refinement;
+    let p = Some(fmaps::solve::sinkhorn::Sinkhorn::default());
+    Ok(match r {
+        Refinement::None => bail!("{method}+sinkhorn: the method has no refinement"),
+        Refinement::Icp(icp) => Refinement::Icp(fmaps::refine::Icp {
+            sinkhorn: p,
+            ..*icp
+        }),
+        Refinement::ZoomOut { zoomout, samples } => Refinement::ZoomOut {
+            zoomout: fmaps::refine::ZoomOut {
+                sinkhorn: p,
+                ..zoomout.clone()
+            },
+            samples: *samples,
+        },
+        Refinement::Custom(_) => {
+            let preset = method
+                .trim_start_matches("fmaps-")
+                .split(['@', ':'])
+                .next()
+                .unwrap_or("");
+            let mut d = fmaps::refine::DiscreteOp::preset(preset)?;
+            d.sinkhorn = p;
+            Refinement::Custom(std::sync::Arc::new(d))
+        }
+    })
+}
+
 /// The refinement, the extra starts and the restart bar of a pipeline method.
 type PipelineMethod = (fmaps::pipeline::Refinement, Vec<usize>, Option<f64>);
 
@@ -346,6 +406,16 @@ fn collection_pairs(
     name: &str,
 ) -> anyhow::Result<(Collection, Vec<(String, String)>)> {
     match name {
+        "generated-iso" | "generated-noniso" | "generated" => {
+            let root = crate::generated::generated_root(false)?;
+            let c = Collection::open(&root, "generated")?;
+            let pairs = match name {
+                "generated-iso" => crate::generated::iso_pairs(),
+                "generated-noniso" => crate::generated::noniso_pairs(),
+                _ => c.test_pairs()?,
+            };
+            Ok((c, pairs))
+        }
         "FAUST_r" => {
             let c = Collection::open(bcicp, "FAUST")?;
             let shapes: Vec<String> = (80..100).map(|i| format!("tr_reg_{i:03}")).collect();

@@ -5,6 +5,8 @@
 //!   stdout and `target/bench/eigensolve.json`.
 //! - `cargo xtask eval [--collection C] [--pairs N]`: the benchmark table
 //!   (published maps today), JSON per method in `target/eval/`.
+//! - `cargo xtask generate`: the generated body collection (exact ground
+//!   truth; `generated-iso` and `generated-noniso` pairs).
 //! - `cargo xtask descriptor-check`: HKS/WKS against pyFM's.
 //! - `cargo xtask pictures`: pictures of one FAUST and one TOSCA pair in
 //!   `docs/pictures/`.
@@ -21,6 +23,7 @@ mod descriptor_check;
 mod eval;
 mod figures;
 mod fit_check;
+mod generated;
 mod geodesic_check;
 mod pictures;
 mod publish_check;
@@ -42,6 +45,8 @@ enum Command {
     Bench(bench::Args),
     /// The benchmark table over test pairs (published maps, fmaps-init, fmaps-icp, fmaps-zoomout[:START:FINAL:STEP], REFINER@PUBLISHED such as zoomout@WKSini_symm, pyfm:<stage>).
     Eval(eval::Args),
+    /// Write the generated benchmark collection (bodies of different builds and poses, exact ground truth) to target/generated/bcicp/generated.
+    Generate(generated::Args),
     /// Compare HKS/WKS with pyFM's (needs the Python peers).
     DescriptorCheck(descriptor_check::Args),
     /// Compare exact geodesics with tvb-gdist (needs the Python peers).
@@ -76,6 +81,7 @@ fn main() -> anyhow::Result<()> {
     match Cli::parse().command {
         Command::Bench(a) => bench::bench(&a),
         Command::Eval(a) => eval::eval(&a),
+        Command::Generate(a) => generated::generate(&a),
         Command::DescriptorCheck(a) => descriptor_check::descriptor_check(&a),
         Command::GeodesicCheck(a) => geodesic_check::geodesic_check(&a),
         Command::FitCheck(a) => fit_check::fit_check(&a),

@@ -61,6 +61,11 @@ pub(crate) struct MatchArgs {
     /// Convert maps with the adjoint of C (initial map and refinement).
     #[arg(long)]
     adjoint: bool,
+    /// How the refiners turn C into a point map: nearest neighbours, or
+    /// the Fast Sinkhorn Filter (entropic transport on a sparse k-NN
+    /// support; closer to bijective, slower).
+    #[arg(long, value_enum, default_value_t = ConversionKind::Nn)]
+    pub(crate) conversion: ConversionKind,
     /// Multi-start: also run from initial maps of these sizes and keep
     /// the final map whose orientation is best preserved; `none` for a
     /// single start. Default: `20,30` with --refine zoomout,
@@ -116,14 +121,31 @@ impl RefineKind {
     }
 }
 
+/// `--conversion`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub(crate) enum ConversionKind {
+    /// Nearest neighbours.
+    Nn,
+    /// The Fast Sinkhorn Filter (Pai et al. 2021), default parameters.
+    Sinkhorn,
+}
+
+impl ConversionKind {
+    pub(crate) fn sinkhorn(self) -> Option<fmaps::solve::sinkhorn::Sinkhorn> {
+        (self == ConversionKind::Sinkhorn).then(fmaps::solve::sinkhorn::Sinkhorn::default)
+    }
+}
+
 /// A discrete-optimisation preset on the schedule `zoomout` (START:FINAL:
 /// STEP, default 50:150:5), refused when it starts beyond the map's `k`.
 pub(crate) fn discrete_refinement(
     preset: &str,
     zoomout: Option<&str>,
     k: usize,
+    conversion: ConversionKind,
 ) -> Result<fmaps::pipeline::Refinement, Failure> {
     let mut d = fmaps::refine::DiscreteOp::preset(preset).map_err(input)?;
+    d.sinkhorn = conversion.sinkhorn();
     if let Some(text) = zoomout {
         let z =
             ZoomOut::with_schedule(text).map_err(|e| input(anyhow::anyhow!("--zoomout: {e}")))?;
@@ -152,13 +174,14 @@ pub(crate) fn refinement(args: &MatchArgs) -> Result<fmaps::pipeline::Refinement
     };
     let bad = |m: String| Err(input(anyhow::anyhow!(m)));
     if let Some(preset) = kind.discrete_preset() {
-        return discrete_refinement(preset, args.zoomout.as_deref(), args.k);
+        return discrete_refinement(preset, args.zoomout.as_deref(), args.k, args.conversion);
     }
     Ok(match kind {
         RefineKind::None => Refinement::None,
         RefineKind::Icp => Refinement::Icp(Icp {
             max_iterations: args.icp_iterations,
             adjoint: args.adjoint,
+            sinkhorn: args.conversion.sinkhorn(),
         }),
         RefineKind::Zoomout | RefineKind::BijectiveZoomout | RefineKind::Discrete => {
             let schedule = match &args.zoomout {
@@ -181,6 +204,7 @@ pub(crate) fn refinement(args: &MatchArgs) -> Result<fmaps::pipeline::Refinement
                     adjoint: args.adjoint,
                     bijective: args.bijective,
                     subsample: None,
+                    sinkhorn: args.conversion.sinkhorn(),
                 },
                 samples: args.refine_samples,
             }

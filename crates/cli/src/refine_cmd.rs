@@ -40,6 +40,10 @@ pub(crate) struct RefineArgs {
     /// Convert maps with the adjoint of C.
     #[arg(long)]
     adjoint: bool,
+    /// How the refiner turns C into a point map: nearest neighbours, or
+    /// the Fast Sinkhorn Filter (closer to bijective, slower).
+    #[arg(long, value_enum, default_value_t = crate::match_cmd::ConversionKind::Nn)]
+    conversion: crate::match_cmd::ConversionKind,
     /// Keep the meshes' own units (no scaling to unit area).
     #[arg(long)]
     no_area_normalize: bool,
@@ -56,13 +60,19 @@ pub(crate) struct RefineArgs {
 
 fn refinement(args: &RefineArgs) -> Result<Refinement, Failure> {
     if let Some(preset) = args.refine.discrete_preset() {
-        return crate::match_cmd::discrete_refinement(preset, args.zoomout.as_deref(), args.k);
+        return crate::match_cmd::discrete_refinement(
+            preset,
+            args.zoomout.as_deref(),
+            args.k,
+            args.conversion,
+        );
     }
     Ok(match args.refine {
         RefineKind::None => Refinement::None,
         RefineKind::Icp => Refinement::Icp(Icp {
             max_iterations: args.icp_iterations,
             adjoint: args.adjoint,
+            sinkhorn: args.conversion.sinkhorn(),
         }),
         RefineKind::Zoomout | RefineKind::BijectiveZoomout | RefineKind::Discrete => {
             let mut z = match &args.zoomout {
@@ -79,6 +89,7 @@ fn refinement(args: &RefineArgs) -> Result<Refinement, Failure> {
             }
             z.adjoint = args.adjoint;
             z.bijective = args.bijective;
+            z.sinkhorn = args.conversion.sinkhorn();
             Refinement::ZoomOut {
                 zoomout: z,
                 samples: args.refine_samples,

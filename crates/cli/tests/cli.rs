@@ -599,6 +599,38 @@ fn refine_repairs_a_given_map() {
         wrong(&noisy),
         wrong(&r)
     );
+    // The Sinkhorn conversion repairs as well, and covers more of the
+    // target than nearest neighbours (its plan must reach every vertex).
+    let s = json_of(fmaps().current_dir(&dir).args([
+        "refine",
+        "a.off",
+        "b.off",
+        "--init-map",
+        "init.map",
+        "--k",
+        "30",
+        "--zoomout",
+        "30:60:5",
+        "--conversion",
+        "sinkhorn",
+        "--out",
+        "s.map",
+        "--json",
+    ]));
+    assert!(s["refine"]["method"].as_str().unwrap().contains("sinkhorn"));
+    let rs = fmaps::mesh_io::read_map(dir.join("s.map")).unwrap();
+    assert!(
+        wrong(&rs) * 5 < wrong(&noisy),
+        "sinkhorn: {} wrong",
+        wrong(&rs)
+    );
+    let coverage = |v: &serde_json::Value| v["quality"]["coverage"].as_f64().unwrap();
+    assert!(
+        coverage(&s) > coverage(&v),
+        "coverage: sinkhorn {} vs nearest neighbours {}",
+        coverage(&s),
+        coverage(&v)
+    );
     for (args, says) in [
         (vec!["--init-map", "short.map"], "short.map"),
         (

@@ -46,10 +46,12 @@
 #![forbid(unsafe_code)]
 
 pub mod atomic;
+pub mod body;
 mod corres;
 mod creature;
 mod error;
 pub mod generate;
+pub mod isosurface;
 mod obj;
 mod off;
 mod ply;

@@ -53,6 +53,7 @@
 
 mod brute;
 mod cpu;
+mod knn;
 mod prefix;
 mod rows;
 mod tiles;
@@ -73,6 +74,7 @@ use rows::Rows;
 use tree::{LEAF_DATA, LEAF_QUERY, TREE_MAX_DIM, TreeData, tree_search};
 
 pub use cpu::{CpuFeatures, cpu_features};
+pub use knn::{KNN_MARGIN, KNearest, k_nearest_rows};
 pub use wedge::{Fan, wedge_sums};
 
 /// Errors of this crate.

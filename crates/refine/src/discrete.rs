@@ -71,6 +71,9 @@ pub struct DiscreteOp {
     pub weights: DiscreteWeights,
     /// The preset's name, for reports.
     pub preset: &'static str,
+    /// Convert with the Fast Sinkhorn Filter (Pai et al. 2021) instead of
+    /// nearest neighbours (`--conversion sinkhorn`).
+    pub sinkhorn: Option<fmaps_solve::sinkhorn::Sinkhorn>,
 }
 
 impl DiscreteOp {
@@ -103,6 +106,7 @@ impl DiscreteOp {
             inner: 1,
             weights,
             preset,
+            sinkhorn: None,
         })
     }
 
@@ -219,8 +223,16 @@ fn embeddings(
 impl Refiner for DiscreteOp {
     fn name(&self) -> String {
         format!(
-            "{} {}:{}:{}",
-            self.preset, self.k_start, self.k_final, self.step
+            "{} {}:{}:{}{}",
+            self.preset,
+            self.k_start,
+            self.k_final,
+            self.step,
+            if self.sinkhorn.is_some() {
+                " sinkhorn"
+            } else {
+                ""
+            }
         )
     }
 
@@ -269,8 +281,14 @@ impl Refiner for DiscreteOp {
         let nn_params = NnParams::default();
         let mut search = |data: &Mat<f64>, queries: &Mat<f64>, hint: Option<&[usize]>| {
             let t = Instant::now();
-            let r = nearest_rows(data.as_ref(), queries.as_ref(), hint, &nn_params)
-                .map_err(fmaps_solve::Error::Search)?;
+            let r = match &self.sinkhorn {
+                Some(p) => {
+                    fmaps_solve::sinkhorn::sinkhorn_maps(data.as_ref(), queries.as_ref(), p)?
+                        .query_to_data
+                }
+                None => nearest_rows(data.as_ref(), queries.as_ref(), hint, &nn_params)
+                    .map_err(fmaps_solve::Error::Search)?,
+            };
             report.nn_searches += 1;
             report.nn_seconds += t.elapsed().as_secs_f64();
             Ok::<_, Error>(r)

@@ -7,7 +7,8 @@ use nalgebra::DMatrix;
 
 use crate::{Error, Iteration, RefineReport, Refined, Refiner, Result, check_k, count_changed};
 use fmaps_nn::{NnParams, NnStrategy};
-use fmaps_solve::convert::{BasisRows, Conversion, point_map, pullback};
+use fmaps_solve::convert::{BasisRows, Conversion, point_map, point_map_sinkhorn, pullback};
+use fmaps_solve::sinkhorn::Sinkhorn;
 
 /// ICP in the spectral domain: alternate `T_BA = NN(C)` and
 /// `C ← U Vᵀ` for the SVD `U Σ Vᵀ` of `Φ_Bᵀ M_B Π_BA Φ_A`, at the input's
@@ -20,6 +21,9 @@ pub struct Icp {
     pub max_iterations: usize,
     /// Convert with the adjoint (`argmin_x ‖Φ_A(x) − Φ_B(y) C‖`).
     pub adjoint: bool,
+    /// Convert with the Fast Sinkhorn Filter (Pai et al. 2021) instead of
+    /// nearest neighbours (`--conversion sinkhorn`).
+    pub sinkhorn: Option<Sinkhorn>,
 }
 
 impl Default for Icp {
@@ -27,6 +31,7 @@ impl Default for Icp {
         Icp {
             max_iterations: 10,
             adjoint: false,
+            sinkhorn: None,
         }
     }
 }
@@ -34,9 +39,14 @@ impl Default for Icp {
 impl Refiner for Icp {
     fn name(&self) -> String {
         format!(
-            "icp {}{}",
+            "icp {}{}{}",
             self.max_iterations,
-            if self.adjoint { " adjoint" } else { "" }
+            if self.adjoint { " adjoint" } else { "" },
+            if self.sinkhorn.is_some() {
+                " sinkhorn"
+            } else {
+                ""
+            }
         )
     }
 
@@ -87,7 +97,10 @@ impl Refiner for Icp {
         };
         let nn = |c: &DMatrix<f64>, hint: Option<&[usize]>, report: &mut RefineReport| {
             let t = Instant::now();
-            let map = point_map(c, phi_a, phi_b, conversion, hint, &nn_params)?;
+            let map = match &self.sinkhorn {
+                Some(p) => point_map_sinkhorn(c, phi_a, phi_b, conversion, p)?.0,
+                None => point_map(c, phi_a, phi_b, conversion, hint, &nn_params)?,
+            };
             report.nn_searches += 1;
             report.nn_seconds += t.elapsed().as_secs_f64();
             Ok::<_, Error>(map)

@@ -7,7 +7,10 @@ use nalgebra::DMatrix;
 
 use crate::{Error, Iteration, RefineReport, Refined, Refiner, Result, check_k, count_changed};
 use fmaps_nn::NnParams;
-use fmaps_solve::convert::{BasisRows, Conversion, gram, point_map, pullback, pullback_unweighted};
+use fmaps_solve::convert::{
+    BasisRows, Conversion, gram, point_map, point_map_sinkhorn, pullback, pullback_unweighted,
+};
+use fmaps_solve::sinkhorn::Sinkhorn;
 
 /// Vertices of A and of B on which the ZoomOut iterations run (the paper's
 /// fast variant); typically a few thousand farthest points per shape
@@ -48,6 +51,10 @@ pub struct ZoomOut {
     pub bijective: bool,
     /// Run the iterations on sample vertices only.
     pub subsample: Option<Subsample>,
+    /// Convert with the Fast Sinkhorn Filter (Pai et al. 2021) instead of
+    /// nearest neighbours, in every iteration and for the output map
+    /// (`--conversion sinkhorn`).
+    pub sinkhorn: Option<Sinkhorn>,
 }
 
 impl Default for ZoomOut {
@@ -59,6 +66,7 @@ impl Default for ZoomOut {
             adjoint: false,
             bijective: false,
             subsample: None,
+            sinkhorn: None,
         }
     }
 }
@@ -220,6 +228,9 @@ impl Refiner for ZoomOut {
         if let Some(sub) = &self.subsample {
             s.push_str(&format!(" samples {}/{}", sub.a.len(), sub.b.len()));
         }
+        if self.sinkhorn.is_some() {
+            s.push_str(" sinkhorn");
+        }
         s
     }
 
@@ -252,7 +263,10 @@ impl Refiner for ZoomOut {
         let mut nn =
             |c: &DMatrix<f64>, data: &BasisRows, queries: &BasisRows, hint: Option<&[usize]>| {
                 let t = Instant::now();
-                let map = point_map(c, data, queries, conversion, hint, &nn_params)?;
+                let map = match &self.sinkhorn {
+                    Some(p) => point_map_sinkhorn(c, data, queries, conversion, p)?.0,
+                    None => point_map(c, data, queries, conversion, hint, &nn_params)?,
+                };
                 report.nn_searches += 1;
                 report.nn_seconds += t.elapsed().as_secs_f64();
                 Ok::<_, Error>(map)

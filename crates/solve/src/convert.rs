@@ -186,6 +186,37 @@ pub fn point_map(
     .map_err(Error::Search)
 }
 
+/// [`point_map`] by the Fast Sinkhorn Filter ([`crate::sinkhorn`])
+/// instead of nearest neighbours, on the same embeddings (direct or
+/// adjoint): `T_BA`, and the reverse map `T_AB` of the same plan.
+///
+/// Errors: `c_ab` larger than the rows hold; empty shapes; bad parameters.
+pub fn point_map_sinkhorn(
+    c_ab: &DMatrix<f64>,
+    phi_a: &BasisRows,
+    phi_b: &BasisRows,
+    conversion: Conversion,
+    params: &crate::sinkhorn::Sinkhorn,
+) -> Result<(Vec<usize>, Vec<usize>)> {
+    let (kb, ka) = c_ab.shape();
+    check_cols("C_AB columns vs eigenvectors of A", ka, phi_a)?;
+    check_cols("C_AB rows vs eigenvectors of B", kb, phi_b)?;
+    let c = MatRef::from_column_major_slice(c_ab.as_slice(), kb, ka);
+    let maps = match conversion {
+        Conversion::Adjoint => {
+            let queries = product_rows(phi_b.view(kb), c);
+            let queries = MatRef::from_row_major_slice(&queries, phi_b.n(), ka);
+            crate::sinkhorn::sinkhorn_maps(phi_a.view(ka), queries, params)?
+        }
+        Conversion::Direct => {
+            let data = product_rows(phi_a.view(ka), c.transpose());
+            let data = MatRef::from_row_major_slice(&data, phi_a.n(), kb);
+            crate::sinkhorn::sinkhorn_maps(data, phi_b.view(kb), params)?
+        }
+    };
+    Ok((maps.query_to_data, maps.data_to_query))
+}
+
 fn check_cols(what: &'static str, k: usize, rows: &BasisRows) -> Result<()> {
     if k > rows.k() {
         return Err(Error::SizeMismatch {

@@ -37,6 +37,7 @@ pub mod convert;
 mod energy;
 mod normal;
 mod operators;
+pub mod sinkhorn;
 mod types;
 mod weights;
 
@@ -78,6 +79,9 @@ pub enum Error {
     /// The nearest-neighbour search refused its input (empty shapes).
     #[error("nearest-neighbour search: {0}")]
     Search(fmaps_nn::Error),
+    /// A parameter is out of its range.
+    #[error("{0}")]
+    InvalidParameter(String),
     /// A point map refers to a vertex that does not exist.
     #[error("point map entry {at} is {index}, but the target shape has {n} vertices")]
     IndexOutOfRange {
