@@ -9,7 +9,8 @@
 //! the template, girths and head 0.7-1.4, ...), each in four poses (rest,
 //! walking, crouching, reaching, each jittered per individual); every shape
 //! remeshed independently (grid spacing 0.039-0.047, random grid offset:
-//! about 4,300-6,100 vertices) and moved rigidly at random. Ground truth:
+//! about 4,300-6,100 vertices), turned about the vertical axis and moved at
+//! random. Ground truth:
 //! 5,000-odd template points (the vertices of one more mesh of the
 //! template) to the nearest vertex of each shape's rest positions, as
 //! FAUST's and TOSCA's `.vts` do; `.sym.vts` the same for the mirrored
@@ -28,7 +29,7 @@ use crate::util::root;
 
 /// Bump when the generator or the layout changes: the collection is
 /// rebuilt when its stamp differs.
-const VERSION: &str = "generated-bodies v1";
+const VERSION: &str = "generated-bodies v2";
 /// Individuals and poses.
 pub const INDIVIDUALS: usize = 6;
 pub const POSES: usize = 4;

@@ -67,12 +67,16 @@ pub(crate) struct MatchArgs {
     #[arg(long, value_enum, default_value_t = ConversionKind::Nn)]
     pub(crate) conversion: ConversionKind,
     /// Multi-start: also run from initial maps of these sizes and keep
-    /// the final map whose orientation is best preserved; `none` for a
-    /// single start. Default: `20,30` with --refine zoomout,
-    /// bijective-zoomout or discrete (measured: fewer left/right swaps,
-    /// see README), none otherwise.
+    /// one final map by --select; `none` for a single start. Default:
+    /// `8,20` with --refine zoomout, bijective-zoomout or discrete
+    /// (measured: fewer swapped parts, see README), none otherwise.
     #[arg(long, value_name = "K1,K2,..|none")]
     starts: Option<String>,
+    /// With several starts: keep the final map of lowest area distortion
+    /// (default; measured in README), of lowest conformal distortion, or
+    /// of best orientation.
+    #[arg(long, value_enum, default_value_t = SelectKind::Area)]
+    select: SelectKind,
     /// With several starts: try the further starts only when the first
     /// map's orientation score is below this (well-oriented pairs cost one
     /// run).
@@ -119,6 +123,17 @@ impl RefineKind {
             _ => None,
         }
     }
+}
+
+/// `--select`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub(crate) enum SelectKind {
+    /// Lowest conformal distortion of the final map.
+    Conformal,
+    /// Best orientation score of the final map.
+    Orientation,
+    /// Lowest area distortion of the final map.
+    Area,
 }
 
 /// `--conversion`.
@@ -251,6 +266,11 @@ pub(crate) fn params_of(args: &MatchArgs) -> Result<MatchParams, Failure> {
         )));
     }
     params.restart_below = args.restart_below;
+    params.select = match args.select {
+        SelectKind::Conformal => fmaps::pipeline::StartSelection::Conformal,
+        SelectKind::Orientation => fmaps::pipeline::StartSelection::Orientation,
+        SelectKind::Area => fmaps::pipeline::StartSelection::Area,
+    };
     params.k_process = params.k_process.max(params.refine.k_needed());
     Ok(params)
 }
@@ -416,8 +436,9 @@ pub(crate) fn match_cmd(args: &MatchArgs) -> Result<(), Failure> {
     for s in &r.starts {
         outln!(
             o,
-            "  start k = {:<4} orientation {:.3} ({:.2} s){}",
+            "  start k = {:<4} conformal distortion {:.3}, orientation {:.3} ({:.2} s){}",
             s.k,
+            s.quality.conformal_distortion,
             s.orientation,
             s.seconds,
             if s.chosen { "  <- kept" } else { "" }

@@ -312,8 +312,8 @@ fn match_writes_a_one_based_map_and_reports_stages() {
     // The map of a shape to itself keeps its orientation.
     assert!(v["orientation"].as_f64().unwrap() > 0.9, "{v}");
     assert_eq!(v["starts"].as_array().unwrap().len(), 0);
-    // ZoomOut runs multi-start by default (sizes 20 and 30 besides k, those
-    // within the computed basis: here 20).
+    // ZoomOut runs multi-start by default (sizes 8 and 20 besides k, those
+    // within the computed basis: here both).
     let v = json_of(
         fmaps()
             .args(["match", &s(&mesh), &s(&mesh), "--json"])
@@ -326,7 +326,13 @@ fn match_writes_a_one_based_map_and_reports_stages() {
         .iter()
         .map(|s| s["k"].as_u64().unwrap())
         .collect();
-    assert_eq!(ks, [12, 20]);
+    assert_eq!(ks, [12, 8, 20]);
+    // Each start reports its scores; the kept one has the lowest area
+    // distortion (the default --select).
+    let starts = v["starts"].as_array().unwrap();
+    let area = |s: &serde_json::Value| s["quality"]["area_distortion"].as_f64().unwrap();
+    let kept = starts.iter().find(|s| s["chosen"] == true).unwrap();
+    assert!(starts.iter().all(|s| area(kept) <= area(s)), "{v}");
     // Multi-start: one entry per distinct size, exactly one kept.
     let out = fmaps()
         .args(["match", &s(&mesh), &s(&mesh), "--json"])

@@ -1,0 +1,109 @@
+//! Multi-start ([`MatchParams::starts`]): one pipeline run per initial
+//! size, one final map kept by a score without ground truth.
+
+use std::sync::Arc;
+use std::time::Instant;
+
+use fmaps_mesh_io::TriMesh;
+use rayon::prelude::*;
+
+use super::{
+    MatchError, MatchParams, MatchResult, MatchTimes, PreparedShape, Refinement, Start,
+    StartSelection, match_prepared,
+};
+
+/// [`MatchParams::starts`]: one run per initial size, keep the best
+/// oriented final map.
+pub(super) fn multi_start(
+    a: &PreparedShape,
+    b: &PreparedShape,
+    params: &MatchParams,
+) -> Result<MatchResult, MatchError> {
+    let mut sizes = vec![params.k];
+    for &s in &params.starts {
+        if !sizes.contains(&s) {
+            sizes.push(s);
+        }
+    }
+    let sign = if params.orient_reversing { -1.0 } else { 1.0 };
+    let run = |k: usize| -> Result<MatchResult, MatchError> {
+        let mut p = MatchParams {
+            k,
+            starts: Vec::new(),
+            ..params.clone()
+        };
+        match &mut p.refine {
+            Refinement::ZoomOut { zoomout, .. } => zoomout.k_start = zoomout.k_start.min(k),
+            Refinement::Custom(r) => {
+                if let Some(r) = r.for_initial_size(k) {
+                    p.refine = Refinement::Custom(Arc::from(r));
+                }
+            }
+            _ => {}
+        }
+        match_prepared(a, b, &p)
+    };
+    // The first start alone (it may be enough), the others in parallel.
+    let wall = Instant::now();
+    let mut results = vec![run(sizes[0])?];
+    let enough = params
+        .restart_below
+        .is_some_and(|t| sign * results[0].orientation >= t);
+    if !enough {
+        let rest: Vec<Result<MatchResult, MatchError>> =
+            sizes[1..].par_iter().map(|&k| run(k)).collect();
+        for r in rest {
+            results.push(r?);
+        }
+    }
+    let mut times = MatchTimes::default();
+    let mut starts = Vec::with_capacity(results.len());
+    let mut best: Option<(usize, f64, MatchResult)> = None;
+    let mesh = |s: &PreparedShape| TriMesh::new(s.vertices.clone(), s.faces.clone());
+    let (mesh_a, mesh_b) = (
+        mesh(a).map_err(|e| MatchError::InvalidShape {
+            shape: "source",
+            message: e.to_string(),
+        })?,
+        mesh(b).map_err(|e| MatchError::InvalidShape {
+            shape: "target",
+            message: e.to_string(),
+        })?,
+    );
+    for (k, r) in sizes.iter().zip(results) {
+        for (acc, x) in [
+            (&mut times.descriptors, r.times.descriptors),
+            (&mut times.operators, r.times.operators),
+            (&mut times.solve, r.times.solve),
+            (&mut times.point_map, r.times.point_map),
+            (&mut times.refine, r.times.refine),
+        ] {
+            *acc += x;
+        }
+        let quality = crate::eval::map_quality(&r.t_ab, &mesh_a, &mesh_b, None)
+            .map_err(|e| MatchError::InvalidParameter(format!("map quality: {e}")))?;
+        starts.push(Start {
+            k: *k,
+            orientation: r.orientation,
+            quality,
+            chosen: false,
+            seconds: r.times.total,
+        });
+        // Lower is better.
+        let score = match params.select {
+            StartSelection::Orientation => -sign * r.orientation,
+            StartSelection::Conformal => quality.conformal_distortion,
+            StartSelection::Area => quality.area_distortion,
+        };
+        if best.as_ref().is_none_or(|(_, b, _)| score < *b) {
+            best = Some((starts.len() - 1, score, r));
+        }
+    }
+    // Stages summed over the starts; the total is the wall-clock time.
+    times.total = wall.elapsed().as_secs_f64();
+    let (chosen, _, mut out) = best.expect("at least one start");
+    starts[chosen].chosen = true;
+    out.starts = starts;
+    out.times = times;
+    Ok(out)
+}
