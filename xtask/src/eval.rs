@@ -401,7 +401,7 @@ fn pyfm_seconds(
 /// `FAUST_r` (shapes tr_reg_080 .. tr_reg_099, all 190 unordered pairs,
 /// lower number first) and `FAUST_inter` (the test pairs of two different
 /// people: `tr_reg_0SP`, S the person).
-fn collection_pairs(
+pub(crate) fn collection_pairs(
     bcicp: &std::path::Path,
     name: &str,
 ) -> anyhow::Result<(Collection, Vec<(String, String)>)> {

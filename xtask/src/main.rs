@@ -7,6 +7,8 @@
 //!   (published maps today), JSON per method in `target/eval/`.
 //! - `cargo xtask generate`: the generated body collection (exact ground
 //!   truth; `generated-iso` and `generated-noniso` pairs).
+//! - `cargo xtask starts`: multi-start selection rules against the best
+//!   start per pair.
 //! - `cargo xtask descriptor-check`: HKS/WKS against pyFM's.
 //! - `cargo xtask pictures`: pictures of one FAUST and one TOSCA pair in
 //!   `docs/pictures/`.
@@ -27,6 +29,7 @@ mod generated;
 mod geodesic_check;
 mod pictures;
 mod publish_check;
+mod starts;
 mod test;
 mod util;
 
@@ -47,6 +50,8 @@ enum Command {
     Eval(eval::Args),
     /// Write the generated benchmark collection (bodies of different builds and poses, exact ground truth) to target/generated/bcicp/generated.
     Generate(generated::Args),
+    /// Multi-start selection rules (orientation, area/conformal distortion, ...) against the best start per pair.
+    Starts(starts::Args),
     /// Compare HKS/WKS with pyFM's (needs the Python peers).
     DescriptorCheck(descriptor_check::Args),
     /// Compare exact geodesics with tvb-gdist (needs the Python peers).
@@ -82,6 +87,7 @@ fn main() -> anyhow::Result<()> {
         Command::Bench(a) => bench::bench(&a),
         Command::Eval(a) => eval::eval(&a),
         Command::Generate(a) => generated::generate(&a),
+        Command::Starts(a) => starts::starts(&a),
         Command::DescriptorCheck(a) => descriptor_check::descriptor_check(&a),
         Command::GeodesicCheck(a) => geodesic_check::geodesic_check(&a),
         Command::FitCheck(a) => fit_check::fit_check(&a),

@@ -7,7 +7,7 @@
 use std::path::PathBuf;
 
 use anyhow::Context;
-use fmaps::eval::{Collection, EvalParams, MapReport, evaluate};
+use fmaps::eval::{EvalParams, MapReport, evaluate};
 use fmaps::geodesic::ExactSolver;
 use fmaps::mesh_io::TriMesh;
 use fmaps::pipeline::{MatchParams, Refinement, match_prepared, prepare};
@@ -19,7 +19,8 @@ use crate::util::{bcicp_dir, collections_or_default, root};
 /// Options of `cargo xtask pictures`.
 #[derive(clap::Args)]
 pub struct Args {
-    /// Collections (default: FAUST and TOSCA_Isometric).
+    /// Collections (default: FAUST and TOSCA_Isometric; also the splits
+    /// and generated collections of `cargo xtask eval`).
     #[arg(long = "collection")]
     collections: Vec<String>,
     /// Which test pair (0-based line of test_pairs.txt).
@@ -91,9 +92,8 @@ pub fn pictures(args: &Args) -> anyhow::Result<()> {
         .unwrap_or_else(|| root().join("docs/pictures"));
     let ep = EvalParams::default();
     for cname in &collections {
-        let c = Collection::open(&bcicp, cname)?;
-        let (a, b) = c
-            .test_pairs()?
+        let (c, pairs) = crate::eval::collection_pairs(&bcicp, cname)?;
+        let (a, b) = pairs
             .into_iter()
             .nth(args.pair)
             .with_context(|| format!("{cname} has no test pair {}", args.pair))?;
