@@ -2,7 +2,7 @@
 
 use fmaps::mesh_io::TriMesh;
 use fmaps::mesh_io::generate::icosphere;
-use fmaps::pipeline::{MatchError, MatchParams, Refinement, match_shapes};
+use fmaps::pipeline::{MatchError, MatchParams, Refinement, StartSelection, match_shapes};
 
 /// An ellipsoid with two off-axis bumps: no symmetry left.
 fn blob() -> TriMesh {
@@ -154,6 +154,7 @@ fn multi_start_keeps_the_best_oriented_start_and_equals_that_single_run() {
         let base = MatchParams {
             refine: Refinement::zoomout(20, 30, 5),
             orient_reversing: reversing,
+            select: StartSelection::Orientation,
             ..small_params()
         };
         let multi = MatchParams {
@@ -203,6 +204,16 @@ fn multi_start_keeps_the_best_oriented_start_and_equals_that_single_run() {
         let eager = match_shapes(&a, &b, &eager).unwrap();
         assert_eq!(eager.starts.len(), 3);
         assert_eq!(eager.t_ab, r.t_ab);
+        // The default selection keeps the start of lowest area distortion.
+        let by_area = MatchParams {
+            select: StartSelection::default(),
+            ..multi.clone()
+        };
+        let by_area = match_shapes(&a, &b, &by_area).unwrap();
+        let kept = by_area.starts.iter().find(|s| s.chosen).unwrap();
+        for s in &by_area.starts {
+            assert!(kept.quality.area_distortion <= s.quality.area_distortion);
+        }
         if !reversing {
             // Mean distance (on A) between the image and the truth, for a
             // shape about 2.6 across.

@@ -22,9 +22,12 @@ pub struct Args {
     /// Collection (any of `cargo xtask eval`'s).
     #[arg(long, default_value = "TOSCA_Isometric")]
     collection: String,
-    /// The first N pairs.
+    /// The first N pairs (after --stride).
     #[arg(long, default_value_t = 10)]
     pairs: usize,
+    /// Take every STRIDE-th pair.
+    #[arg(long, default_value_t = 1)]
+    stride: usize,
     /// Initial map sizes to run (the first is the pipeline's k).
     #[arg(long, default_value = "50,8,12,20,30", value_delimiter = ',')]
     sizes: Vec<usize>,
@@ -54,7 +57,7 @@ pub fn starts(args: &Args) -> anyhow::Result<()> {
         ..MatchParams::default()
     };
     let mut all: Vec<Vec<Run>> = Vec::new();
-    for (a, b) in pairs.iter().take(args.pairs) {
+    for (a, b) in pairs.iter().step_by(args.stride.max(1)).take(args.pairs) {
         let (ma, mb) = (c.read_mesh(a)?, c.read_mesh(b)?);
         let (pa, pb) = (prepare(&ma, &params)?, prepare(&mb, &params)?);
         let gt = c.ground_truth(a, b, ma.n_vertices(), mb.n_vertices())?;
