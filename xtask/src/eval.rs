@@ -264,7 +264,9 @@ fn pipeline_method(method: &str) -> anyhow::Result<Option<PipelineMethod>> {
             "fmaps-init" => Refinement::None,
             "fmaps-icp" => Refinement::Icp(fmaps::refine::Icp::default()),
             "fmaps-zoomout" => Refinement::default_zoomout(),
-            "fmaps-bijective-zoomout" | "fmaps-discrete" => refiner_method(&method[6..])?,
+            "fmaps-bijective-zoomout" | "fmaps-discrete" | "fmaps-bcicp" => {
+                refiner_method(&method[6..])?
+            }
             m => match m.strip_prefix("fmaps-zoomout:") {
                 Some(spec) => Refinement::ZoomOut {
                     zoomout: fmaps::refine::ZoomOut::with_schedule(spec)
@@ -310,6 +312,7 @@ fn refiner_method(refiner: &str) -> anyhow::Result<fmaps::pipeline::Refinement> 
         "bijective-zoomout" | "discrete" => Refinement::Custom(std::sync::Arc::new(
             fmaps::refine::DiscreteOp::preset(refiner)?,
         )),
+        "bcicp" => Refinement::Custom(std::sync::Arc::new(fmaps::refine::Repair::default())),
         r => match r.strip_prefix("zoomout:") {
             Some(spec) => Refinement::ZoomOut {
                 zoomout: fmaps::refine::ZoomOut::with_schedule(spec)
@@ -317,7 +320,7 @@ fn refiner_method(refiner: &str) -> anyhow::Result<fmaps::pipeline::Refinement> 
                 samples: None,
             },
             None => bail!(
-                "unknown refiner '{r}' in {r}@..: expected zoomout, zoomout:START:FINAL:STEP, icp, bijective-zoomout or discrete"
+                "unknown refiner '{r}' in {r}@..: expected zoomout, zoomout:START:FINAL:STEP, icp, bijective-zoomout, discrete or bcicp"
             ),
         },
     })

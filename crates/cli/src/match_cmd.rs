@@ -112,6 +112,10 @@ pub(crate) enum RefineKind {
     /// bijectivity, properness and Laplacian commutativity (equal
     /// weights); schedule from --zoomout.
     Discrete,
+    /// A repair of the BCICP class (Ren et al., SIGGRAPH Asia 2018) at
+    /// the map's size: bijective ICP alternated with coverage, continuity
+    /// and smoothness repairs of both point maps on the meshes.
+    Bcicp,
 }
 
 impl RefineKind {
@@ -193,6 +197,9 @@ pub(crate) fn refinement(args: &MatchArgs) -> Result<fmaps::pipeline::Refinement
     }
     Ok(match kind {
         RefineKind::None => Refinement::None,
+        RefineKind::Bcicp => {
+            Refinement::Custom(std::sync::Arc::new(fmaps::refine::Repair::default()))
+        }
         RefineKind::Icp => Refinement::Icp(Icp {
             max_iterations: args.icp_iterations,
             adjoint: args.adjoint,

@@ -69,6 +69,9 @@ fn refinement(args: &RefineArgs) -> Result<Refinement, Failure> {
     }
     Ok(match args.refine {
         RefineKind::None => Refinement::None,
+        RefineKind::Bcicp => {
+            Refinement::Custom(std::sync::Arc::new(fmaps::refine::Repair::default()))
+        }
         RefineKind::Icp => Refinement::Icp(Icp {
             max_iterations: args.icp_iterations,
             adjoint: args.adjoint,

@@ -708,13 +708,24 @@ pub fn refine_result(
     // A point map A -> B pulls functions back from B to A, so T_AB goes
     // with C_BA: the refiner's (c_ab, basis_a, basis_b) -> t_ba contract
     // is applied to the pair (B, A), and its t_ba is our T_AB.
-    let refined = refiner.refine(&out.c_ba, &b.basis, &a.basis)?;
+    let refined =
+        refiner.refine_with_geometry(&out.c_ba, &b.basis, &a.basis, b.geometry(), a.geometry())?;
     out.c_ba = refined.c_ab;
     out.t_ab = refined.t_ba;
     out.refine = Some(refined.report);
     out.times.refine = t.elapsed().as_secs_f64();
     out.times.total += out.times.refine;
     Ok(())
+}
+
+impl PreparedShape {
+    /// Its vertices and triangles, for refiners that work on the meshes.
+    pub fn geometry(&self) -> refine::ShapeGeometry<'_> {
+        refine::ShapeGeometry {
+            vertices: &self.vertices,
+            faces: &self.faces,
+        }
+    }
 }
 
 /// The arrays of a prepared shape the energy needs (its basis truncated

@@ -139,10 +139,10 @@ impl DiscreteOp {
 }
 
 /// One shape's rows and what its embedding blocks need.
-struct Shape<'a> {
-    phi: BasisRows,
-    mass: &'a [f64],
-    evals: &'a [f64],
+pub(crate) struct Shape<'a> {
+    pub(crate) phi: BasisRows,
+    pub(crate) mass: &'a [f64],
+    pub(crate) evals: &'a [f64],
 }
 
 /// `Φ[:, :k] M` (n x k) into `dst`, `m` a k x k nalgebra matrix.
@@ -156,7 +156,7 @@ fn times(dst: faer::MatMut<'_, f64>, phi: MatRef<'_, f64>, m: &DMatrix<f64>) {
 /// `data` per vertex of `other`, a row of `queries` per vertex of `this`):
 /// `c_to_this` maps functions on `other` to `this` (the C of the point map
 /// being solved for), `c_back` the reverse one.
-fn embeddings(
+pub(crate) fn embeddings(
     w: &DiscreteWeights,
     k: usize,
     other: &Shape<'_>,

@@ -20,6 +20,11 @@
 //!   pairs of point maps by nearest-neighbour searches in concatenated
 //!   embeddings; its presets include the paper's bijective ZoomOut.
 //!
+//! - [`Repair`]: a repair of the BCICP class (Ren, Poulenard, Wonka,
+//!   Ovsjanikov, SIGGRAPH Asia 2018): bijective ICP in the spectral
+//!   domain alternated with coverage, continuity and smoothness repairs of
+//!   both point maps on the meshes ([`Refiner::refine_with_geometry`]).
+//!
 //! All implement [`Refiner`], so a pipeline swaps one for the other (or
 //! for its own) through a trait object. Every nearest-neighbour search is
 //! exact ([`fmaps_nn::nearest_rows`]), so the results are deterministic
@@ -58,6 +63,7 @@ pub mod conformance;
 mod discrete;
 mod icp;
 mod orientation;
+mod repair;
 mod sampling;
 mod zoomout;
 
@@ -69,6 +75,7 @@ use nalgebra::DMatrix;
 pub use discrete::{DiscreteOp, DiscreteWeights};
 pub use icp::Icp;
 pub use orientation::orientation_score;
+pub use repair::Repair;
 pub use sampling::farthest_point_sampling;
 pub use zoomout::{Subsample, ZoomOut};
 
@@ -193,6 +200,15 @@ impl fmt::Display for RefineReport {
     }
 }
 
+/// A shape's vertices and triangles, for [`Refiner::refine_with_geometry`].
+#[derive(Debug, Clone, Copy)]
+pub struct ShapeGeometry<'a> {
+    /// Vertex positions (the rows of the shape's basis, in order).
+    pub vertices: &'a [[f64; 3]],
+    /// Triangles (0-based vertex indices).
+    pub faces: &'a [[usize; 3]],
+}
+
 /// A refinement of a functional map between two shapes.
 ///
 /// `c_ab` is k_B x k_A (its sizes select the leading eigenpairs of each
@@ -215,6 +231,22 @@ pub trait Refiner: Send + Sync {
     /// least this many. Default 0.
     fn k_needed(&self) -> usize {
         0
+    }
+
+    /// [`Refiner::refine`] with the two shapes' geometry (vertex positions
+    /// and triangles, rows in the order of `basis_a` and `basis_b`), for
+    /// refiners that work in the point domain as well ([`Repair`]).
+    /// Default: the geometry is not needed, [`Refiner::refine`].
+    fn refine_with_geometry(
+        &self,
+        c_ab: &DMatrix<f64>,
+        basis_a: &SpectralBasis,
+        basis_b: &SpectralBasis,
+        geometry_a: ShapeGeometry<'_>,
+        geometry_b: ShapeGeometry<'_>,
+    ) -> Result<Refined> {
+        let _ = (geometry_a, geometry_b);
+        self.refine(c_ab, basis_a, basis_b)
     }
 
     /// The same refiner for an initial map of size `k` when it reads a

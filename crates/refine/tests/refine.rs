@@ -499,3 +499,58 @@ fn discrete_optimisation_presets() {
     };
     assert!(bad.refine(&c, &p.basis_a, &p.basis_b).is_err());
 }
+
+fn geometry(m: &TriMesh) -> fmaps_refine::ShapeGeometry<'_> {
+    fmaps_refine::ShapeGeometry {
+        vertices: m.vertices(),
+        faces: m.faces(),
+    }
+}
+
+#[test]
+fn the_repair_keeps_an_exact_map_and_repairs_a_noisy_one() {
+    use fmaps_refine::Repair;
+    let p = pair(60, true);
+    // Identity on a self-map.
+    let id = DMatrix::<f64>::identity(20, 20);
+    let r = Repair::default()
+        .refine_with_geometry(&id, &p.basis_a, &p.basis_a, geometry(&p.a), geometry(&p.a))
+        .unwrap();
+    assert!(r.t_ba.iter().enumerate().all(|(y, &x)| x == y));
+    assert_eq!(r.c_ab.shape(), (20, 20));
+    // A noisy map of the nearly isometric, renumbered pair: repaired below
+    // half the error and (permutation equivariance) to the true
+    // renumbering wherever the map is right.
+    let c = noisy(&true_fmap(&p, 20), 0.15, 7);
+    let before = error(
+        &p,
+        &point_map_from_fmap(&c, &p.basis_a, &p.basis_b).unwrap(),
+    );
+    let r = Repair::default()
+        .refine_with_geometry(&c, &p.basis_a, &p.basis_b, geometry(&p.a), geometry(&p.b))
+        .unwrap();
+    let after = error(&p, &r.t_ba);
+    assert!(after < 0.5 * before, "before {before}, after {after}");
+    // More bijective than the nearest-neighbour conversion of the same C.
+    let hit = |t: &[usize]| {
+        let mut s = t.to_vec();
+        s.sort_unstable();
+        s.dedup();
+        s.len()
+    };
+    let nn = point_map_from_fmap(&c, &p.basis_a, &p.basis_b).unwrap();
+    assert!(hit(&r.t_ba) > hit(&nn), "{} vs {}", hit(&r.t_ba), hit(&nn));
+    // Without the geometry it refuses rather than guessing.
+    assert!(
+        Repair::default()
+            .refine(&c, &p.basis_a, &p.basis_b)
+            .is_err()
+    );
+    // Geometry that does not belong to the bases is refused.
+    let tiny = fmaps_mesh_io::generate::icosphere(1.0, 1);
+    assert!(
+        Repair::default()
+            .refine_with_geometry(&c, &p.basis_a, &p.basis_b, geometry(&tiny), geometry(&p.b))
+            .is_err()
+    );
+}
