@@ -40,6 +40,7 @@
 //! ```
 
 use crate::isosurface::{Grid, marching_tetrahedra, relax};
+use crate::vec3::{dot, normalized, rotate, smoothstep, sub};
 use crate::{Result, TriMesh};
 
 /// Number of bones of the template skeleton.
@@ -670,11 +671,6 @@ fn capsule_distance(c: &Capsule, p: [f64; 3]) -> f64 {
     dot(d, d).sqrt() - (c.ra + t * (c.rb - c.ra))
 }
 
-fn smoothstep(x: f64) -> f64 {
-    let x = x.clamp(0.0, 1.0);
-    x * x * (3.0 - 2.0 * x)
-}
-
 /// Polynomial smooth minimum of width `k`.
 fn smooth_min(a: f64, b: f64, k: f64) -> f64 {
     if !a.is_finite() {
@@ -717,36 +713,6 @@ fn mat_mul(a: &[[f64; 3]; 3], b: &[[f64; 3]; 3]) -> [[f64; 3]; 3] {
 
 fn mat_vec(a: &[[f64; 3]; 3], x: [f64; 3]) -> [f64; 3] {
     [dot(a[0], x), dot(a[1], x), dot(a[2], x)]
-}
-
-fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
-}
-
-fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-}
-
-fn normalized(a: [f64; 3]) -> [f64; 3] {
-    let n = dot(a, a).sqrt();
-    [a[0] / n, a[1] / n, a[2] / n]
-}
-
-/// Rodrigues' rotation of `p` about the unit `axis` by `angle`.
-fn rotate(p: [f64; 3], axis: [f64; 3], angle: f64) -> [f64; 3] {
-    let (s, c) = angle.sin_cos();
-    let k = axis;
-    let kxp = [
-        k[1] * p[2] - k[2] * p[1],
-        k[2] * p[0] - k[0] * p[2],
-        k[0] * p[1] - k[1] * p[0],
-    ];
-    let kp = dot(k, p);
-    [
-        p[0] * c + kxp[0] * s + k[0] * kp * (1.0 - c),
-        p[1] * c + kxp[1] * s + k[1] * kp * (1.0 - c),
-        p[2] * c + kxp[2] * s + k[2] * kp * (1.0 - c),
-    ]
 }
 
 /// SplitMix64: a small deterministic generator (no dependency).

@@ -9,6 +9,7 @@
 
 use crate::TriMesh;
 use crate::generate::icosphere;
+use crate::vec3::{dot, normalized, rotate, smoothstep};
 
 /// One limb: a smooth protrusion of the unit sphere along `direction`.
 #[derive(Debug, Clone, Copy)]
@@ -160,37 +161,6 @@ pub fn creature_pair(subdivisions: u32) -> MeshPair {
         target,
         truth,
     }
-}
-
-fn smoothstep(x: f64) -> f64 {
-    let x = x.clamp(0.0, 1.0);
-    x * x * (3.0 - 2.0 * x)
-}
-
-fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-}
-
-fn normalized(a: [f64; 3]) -> [f64; 3] {
-    let n = dot(a, a).sqrt();
-    [a[0] / n, a[1] / n, a[2] / n]
-}
-
-/// Rodrigues' rotation of `p` about the unit `axis` by `angle`.
-fn rotate(p: [f64; 3], axis: [f64; 3], angle: f64) -> [f64; 3] {
-    let (s, c) = angle.sin_cos();
-    let k = axis;
-    let kxp = [
-        k[1] * p[2] - k[2] * p[1],
-        k[2] * p[0] - k[0] * p[2],
-        k[0] * p[1] - k[1] * p[0],
-    ];
-    let kp = dot(k, p);
-    [
-        p[0] * c + kxp[0] * s + k[0] * kp * (1.0 - c),
-        p[1] * c + kxp[1] * s + k[1] * kp * (1.0 - c),
-        p[2] * c + kxp[2] * s + k[2] * kp * (1.0 - c),
-    ]
 }
 
 #[cfg(test)]

@@ -29,6 +29,7 @@
 
 use std::collections::HashMap;
 
+use crate::vec3::{cross, dot, sub};
 use crate::{Error, Result, TriMesh};
 
 /// A regular sampling grid: nodes at `min + offset + spacing * (i, j, k)`
@@ -200,7 +201,7 @@ fn march_tet(
     };
     let mut emit = |p: usize, q: usize, r: usize| {
         let (vp, vq, vr) = (vertices[p], vertices[q], vertices[r]);
-        let n = cross3(sub(vq, vp), sub(vr, vp));
+        let n = cross(sub(vq, vp), sub(vr, vp));
         if dot(n, out_dir) >= 0.0 {
             faces.push([p, q, r]);
         } else {
@@ -300,22 +301,6 @@ fn bbox_diagonal(v: &[[f64; 3]]) -> f64 {
     (0..3).map(|a| (hi[a] - lo[a]).powi(2)).sum::<f64>().sqrt()
 }
 
-fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
-}
-
-fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-}
-
-fn cross3(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [
-        a[1] * b[2] - a[2] * b[1],
-        a[2] * b[0] - a[0] * b[2],
-        a[0] * b[1] - a[1] * b[0],
-    ]
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -344,7 +329,7 @@ mod tests {
             .iter()
             .map(|t| {
                 let [p, q, r] = t.map(|i| mesh.vertices()[i]);
-                0.5 * dot(cross3(sub(q, p), sub(r, p)), cross3(sub(q, p), sub(r, p))).sqrt()
+                0.5 * dot(cross(sub(q, p), sub(r, p)), cross(sub(q, p), sub(r, p))).sqrt()
             })
             .sum();
         let exact = 4.0 * std::f64::consts::PI.powi(2) * 0.35;
@@ -359,7 +344,7 @@ mod tests {
             .iter()
             .map(|t| {
                 let [p, q, r] = t.map(|i| mesh.vertices()[i]);
-                dot(p, cross3(q, r)) / 6.0
+                dot(p, cross(q, r)) / 6.0
             })
             .sum();
         let exact_vol = 2.0 * std::f64::consts::PI.powi(2) * 0.35 * 0.35;

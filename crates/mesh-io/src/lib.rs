@@ -56,6 +56,7 @@ mod obj;
 mod off;
 mod ply;
 mod validate;
+mod vec3;
 
 use std::fs;
 use std::path::Path;
