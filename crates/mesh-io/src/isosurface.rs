@@ -163,7 +163,7 @@ fn march_tet(
     if inside.is_empty() || outside.is_empty() {
         return;
     }
-    let mut cross = |a: usize, b: usize| -> usize {
+    let mut crossing = |a: usize, b: usize| -> usize {
         let (ga, pa, fa) = tet[a];
         let (gb, pb, fb) = tet[b];
         let key = (ga.min(gb), ga.max(gb));
@@ -190,13 +190,18 @@ fn march_tet(
     let (ci, co) = (centroid(&inside), centroid(&outside));
     let out_dir = [co[0] - ci[0], co[1] - ci[1], co[2] - ci[2]];
     let polygon: Vec<usize> = match (inside.len(), outside.len()) {
-        (1, 3) => outside.iter().map(|&o| cross(inside[0], o)).collect(),
-        (3, 1) => inside.iter().map(|&i| cross(i, outside[0])).collect(),
+        (1, 3) => outside.iter().map(|&o| crossing(inside[0], o)).collect(),
+        (3, 1) => inside.iter().map(|&i| crossing(i, outside[0])).collect(),
         _ => {
             // Two and two: the quad's corners in cyclic order.
             let (a, b) = (inside[0], inside[1]);
             let (c, d) = (outside[0], outside[1]);
-            vec![cross(a, c), cross(a, d), cross(b, d), cross(b, c)]
+            vec![
+                crossing(a, c),
+                crossing(a, d),
+                crossing(b, d),
+                crossing(b, c),
+            ]
         }
     };
     let mut emit = |p: usize, q: usize, r: usize| {
