@@ -138,6 +138,28 @@ impl DiscreteOp {
     }
 }
 
+/// The nearest row of `data` for every row of `queries` (or the Sinkhorn
+/// conversion's map), counted and timed in `report`.
+pub(crate) fn search_rows(
+    data: &Mat<f64>,
+    queries: &Mat<f64>,
+    hint: Option<&[usize]>,
+    sinkhorn: Option<&fmaps_solve::sinkhorn::Sinkhorn>,
+    report: &mut RefineReport,
+) -> Result<Vec<usize>> {
+    let t = Instant::now();
+    let r = match sinkhorn {
+        Some(p) => {
+            fmaps_solve::sinkhorn::sinkhorn_maps(data.as_ref(), queries.as_ref(), p)?.query_to_data
+        }
+        None => nearest_rows(data.as_ref(), queries.as_ref(), hint, &NnParams::default())
+            .map_err(fmaps_solve::Error::Search)?,
+    };
+    report.nn_searches += 1;
+    report.nn_seconds += t.elapsed().as_secs_f64();
+    Ok(r)
+}
+
 /// One shape's rows and what its embedding blocks need.
 pub(crate) struct Shape<'a> {
     pub(crate) phi: BasisRows,
@@ -270,29 +292,7 @@ impl Refiner for DiscreteOp {
             mass: basis_b.mass.as_slice(),
             evals: basis_b.eigenvalues.as_slice(),
         };
-        let mut report = RefineReport {
-            method: self.name(),
-            iterations: Vec::new(),
-            converged: false,
-            nn_searches: 0,
-            nn_seconds: 0.0,
-            seconds: 0.0,
-        };
-        let nn_params = NnParams::default();
-        let mut search = |data: &Mat<f64>, queries: &Mat<f64>, hint: Option<&[usize]>| {
-            let t = Instant::now();
-            let r = match &self.sinkhorn {
-                Some(p) => {
-                    fmaps_solve::sinkhorn::sinkhorn_maps(data.as_ref(), queries.as_ref(), p)?
-                        .query_to_data
-                }
-                None => nearest_rows(data.as_ref(), queries.as_ref(), hint, &nn_params)
-                    .map_err(fmaps_solve::Error::Search)?,
-            };
-            report.nn_searches += 1;
-            report.nn_seconds += t.elapsed().as_secs_f64();
-            Ok::<_, Error>(r)
-        };
+        let mut report = RefineReport::start(self.name());
         // The start: the given C_AB's block and, for lack of a reverse map,
         // C_BA = C_ABᵀ (the maps of an isometry are orthonormal); the same
         // energy's searches give the first T_BA and T_AB.
@@ -300,9 +300,9 @@ impl Refiner for DiscreteOp {
         let c0 = c_ab.view((0, 0), (k0, k0)).into_owned();
         let c0t = c0.transpose();
         let (d, q) = embeddings(&self.weights, k0, &a, &b, &c0, &c0t);
-        let mut t_ba = search(&d, &q, None)?;
+        let mut t_ba = search_rows(&d, &q, None, self.sinkhorn.as_ref(), &mut report)?;
         let (d, q) = embeddings(&self.weights, k0, &b, &a, &c0t, &c0);
-        let mut t_ab = search(&d, &q, None)?;
+        let mut t_ab = search_rows(&d, &q, None, self.sinkhorn.as_ref(), &mut report)?;
         // As in ZoomOut: each size fits both Cs to the current point maps
         // and updates the maps; the start size only converts.
         for k in crate::growth_schedule(self.k_start, self.k_final, self.step) {
@@ -312,9 +312,11 @@ impl Refiner for DiscreteOp {
                 let c = pullback(&t_ba, &a.phi, k, &b.phi, k, b.mass)?;
                 let c_ba = pullback(&t_ab, &b.phi, k, &a.phi, k, a.mass)?;
                 let (d, q) = embeddings(&self.weights, k, &a, &b, &c, &c_ba);
-                let next_ba = search(&d, &q, Some(&t_ba))?;
+                let next_ba =
+                    search_rows(&d, &q, Some(&t_ba), self.sinkhorn.as_ref(), &mut report)?;
                 let (d, q) = embeddings(&self.weights, k, &b, &a, &c_ba, &c);
-                let next_ab = search(&d, &q, Some(&t_ab))?;
+                let next_ab =
+                    search_rows(&d, &q, Some(&t_ab), self.sinkhorn.as_ref(), &mut report)?;
                 report.iterations.push(Iteration {
                     k: (k, k),
                     changed: count_changed(Some(&t_ba), &next_ba),

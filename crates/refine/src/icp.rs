@@ -71,14 +71,7 @@ impl Refiner for Icp {
         );
         let (phi_a, phi_b) = (&phi_a, &phi_b);
         let mass_b = basis_b.mass.as_slice();
-        let mut report = RefineReport {
-            method: self.name(),
-            iterations: Vec::new(),
-            converged: false,
-            nn_searches: 0,
-            nn_seconds: 0.0,
-            seconds: 0.0,
-        };
+        let mut report = RefineReport::start(self.name());
         // ICP's map changes little from one iteration to the next, so the
         // previous one is a good guess at every step: without matrix tiles
         // the prefix search pays from lower dimensions than in ZoomOut,

@@ -172,6 +172,20 @@ pub struct RefineReport {
     pub seconds: f64,
 }
 
+impl RefineReport {
+    /// The report of a refinement that is starting: no iterations yet.
+    pub(crate) fn start(method: String) -> RefineReport {
+        RefineReport {
+            method,
+            iterations: Vec::new(),
+            converged: false,
+            nn_searches: 0,
+            nn_seconds: 0.0,
+            seconds: 0.0,
+        }
+    }
+}
+
 impl fmt::Display for RefineReport {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         let last = self.iterations.last();

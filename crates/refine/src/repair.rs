@@ -39,11 +39,10 @@ use std::collections::BinaryHeap;
 use std::time::Instant;
 
 use fmaps_eigensolve::SpectralBasis;
-use fmaps_nn::{NnParams, nearest_rows};
 use fmaps_solve::convert::{BasisRows, pullback};
 use nalgebra::DMatrix;
 
-use crate::discrete::{Shape, embeddings};
+use crate::discrete::{Shape, embeddings, search_rows};
 use crate::{
     DiscreteWeights, Error, Iteration, RefineReport, Refined, Refiner, Result, ShapeGeometry,
     check_k, count_changed,
@@ -303,24 +302,7 @@ impl Refiner for Repair {
             mass: basis_b.mass.as_slice(),
             evals: basis_b.eigenvalues.as_slice(),
         };
-        let mut report = RefineReport {
-            method: self.name(),
-            iterations: Vec::new(),
-            converged: false,
-            nn_searches: 0,
-            nn_seconds: 0.0,
-            seconds: 0.0,
-        };
-        let nn_params = NnParams::default();
-        let mut search =
-            |data: &faer::Mat<f64>, queries: &faer::Mat<f64>, hint: Option<&[usize]>| {
-                let t = Instant::now();
-                let r = nearest_rows(data.as_ref(), queries.as_ref(), hint, &nn_params)
-                    .map_err(fmaps_solve::Error::Search)?;
-                report.nn_searches += 1;
-                report.nn_seconds += t.elapsed().as_secs_f64();
-                Ok::<_, Error>(r)
-            };
+        let mut report = RefineReport::start(self.name());
         let proper = DiscreteWeights {
             coupling: 0.0,
             bijectivity: 0.0,
@@ -335,16 +317,16 @@ impl Refiner for Repair {
         let c0 = c_ab.view((0, 0), (k, k)).into_owned();
         let c0t = c0.transpose();
         let (d, q) = embeddings(&proper, k, &a, &b, &c0, &c0t);
-        let mut t_ba = search(&d, &q, None)?;
+        let mut t_ba = search_rows(&d, &q, None, None, &mut report)?;
         let (d, q) = embeddings(&proper, k, &b, &a, &c0t, &c0);
-        let mut t_ab = search(&d, &q, None)?;
+        let mut t_ab = search_rows(&d, &q, None, None, &mut report)?;
         for _ in 0..self.smoothing {
             let c = pullback(&t_ba, &a.phi, k, &b.phi, k, b.mass)?;
             let c_ba = pullback(&t_ab, &b.phi, k, &a.phi, k, a.mass)?;
             let (d, q) = embeddings(&proper, k, &a, &b, &c, &c_ba);
-            t_ba = search(&d, &q, Some(&t_ba))?;
+            t_ba = search_rows(&d, &q, Some(&t_ba), None, &mut report)?;
             let (d, q) = embeddings(&proper, k, &b, &a, &c_ba, &c);
-            t_ab = search(&d, &q, Some(&t_ab))?;
+            t_ab = search_rows(&d, &q, Some(&t_ab), None, &mut report)?;
         }
         let point_domain = |t_ba: &mut Vec<usize>, t_ab: &mut Vec<usize>| {
             fix_outliers(t_ba, &gb, &geo_a, ga.longest);
@@ -361,9 +343,9 @@ impl Refiner for Repair {
             let c = pullback(&t_ba, &a.phi, k, &b.phi, k, b.mass)?;
             let c_ba = pullback(&t_ab, &b.phi, k, &a.phi, k, a.mass)?;
             let (d, q) = embeddings(&bijective, k, &a, &b, &c, &c_ba);
-            let mut next_ba = search(&d, &q, Some(&t_ba))?;
+            let mut next_ba = search_rows(&d, &q, Some(&t_ba), None, &mut report)?;
             let (d, q) = embeddings(&bijective, k, &b, &a, &c_ba, &c);
-            let mut next_ab = search(&d, &q, Some(&t_ab))?;
+            let mut next_ab = search_rows(&d, &q, Some(&t_ab), None, &mut report)?;
             point_domain(&mut next_ba, &mut next_ab);
             report.iterations.push(Iteration {
                 k: (k, k),

@@ -246,14 +246,7 @@ impl Refiner for ZoomOut {
         let sub = self.subsample.as_ref();
         let side_a = Side::new(basis_a, sub.map(|s| s.a.as_slice()), kf)?;
         let side_b = Side::new(basis_b, sub.map(|s| s.b.as_slice()), kf)?;
-        let mut report = RefineReport {
-            method: self.name(),
-            iterations: Vec::new(),
-            converged: false,
-            nn_searches: 0,
-            nn_seconds: 0.0,
-            seconds: 0.0,
-        };
+        let mut report = RefineReport::start(self.name());
         let conversion = if self.adjoint {
             Conversion::Adjoint
         } else {
