@@ -264,9 +264,11 @@ fn pipeline_method(method: &str) -> anyhow::Result<Option<PipelineMethod>> {
             "fmaps-init" => Refinement::None,
             "fmaps-icp" => Refinement::Icp(fmaps::refine::Icp::default()),
             "fmaps-zoomout" => Refinement::default_zoomout(),
-            "fmaps-bijective-zoomout" | "fmaps-discrete" | "fmaps-bcicp" => {
-                refiner_method(&method[6..])?
-            }
+            "fmaps-bijective-zoomout"
+            | "fmaps-discrete"
+            | "fmaps-bcicp"
+            | "fmaps-smooth-shells" => refiner_method(&method[6..])?,
+            m if m.starts_with("fmaps-smooth-shells:") => refiner_method(&m[6..])?,
             m => match m.strip_prefix("fmaps-zoomout:") {
                 Some(spec) => Refinement::ZoomOut {
                     zoomout: fmaps::refine::ZoomOut::with_schedule(spec)
@@ -313,6 +315,9 @@ fn refiner_method(refiner: &str) -> anyhow::Result<fmaps::pipeline::Refinement> 
             fmaps::refine::DiscreteOp::preset(refiner)?,
         )),
         "bcicp" => Refinement::Custom(std::sync::Arc::new(fmaps::refine::Repair::default())),
+        r if r == "smooth-shells" || r.starts_with("smooth-shells:") => {
+            Refinement::Custom(std::sync::Arc::new(smooth_shells(r)?))
+        }
         r => match r.strip_prefix("zoomout:") {
             Some(spec) => Refinement::ZoomOut {
                 zoomout: fmaps::refine::ZoomOut::with_schedule(spec)
@@ -320,10 +325,45 @@ fn refiner_method(refiner: &str) -> anyhow::Result<fmaps::pipeline::Refinement> 
                 samples: None,
             },
             None => bail!(
-                "unknown refiner '{r}' in {r}@..: expected zoomout, zoomout:START:FINAL:STEP, icp, bijective-zoomout, discrete or bcicp"
+                "unknown refiner '{r}' in {r}@..: expected zoomout, zoomout:START:FINAL:STEP, icp, bijective-zoomout, discrete, bcicp or smooth-shells"
             ),
         },
     })
+}
+
+/// `smooth-shells[:KEY=VALUE,..]`: Smooth Shells with the defaults but the
+/// keys given (k_max, levels, samples, init_samples, proposals, finalists,
+/// signs, seed, rigid, input: 0 or 1 for the last two).
+fn smooth_shells(spec: &str) -> anyhow::Result<fmaps::refine::SmoothShells> {
+    let mut s = fmaps::refine::SmoothShells::default();
+    let Some(list) = spec.strip_prefix("smooth-shells:") else {
+        return Ok(s);
+    };
+    for kv in list.split(',') {
+        let (k, v) = kv
+            .split_once('=')
+            .with_context(|| format!("{spec}: expected KEY=VALUE, got '{kv}'"))?;
+        let n: u64 = v
+            .parse()
+            .with_context(|| format!("{spec}: '{v}' is not a number"))?;
+        let u = n as usize;
+        match k {
+            "k_max" => s.k_max = u,
+            "levels" => s.levels = u,
+            "samples" => s.samples = u,
+            "init_samples" => s.init_samples = u,
+            "proposals" => s.proposals = u,
+            "finalists" => s.finalists = u,
+            "signs" => s.sign_hypotheses = u,
+            "seed" => s.seed = n,
+            "rigid" => s.rigid = n != 0,
+            "input" => s.use_input_map = n != 0,
+            _ => bail!(
+                "{spec}: unknown key '{k}' (k_max, levels, samples, init_samples, proposals, finalists, signs, seed, rigid, input)"
+            ),
+        }
+    }
+    Ok(s)
 }
 
 /// The same refinement converting with the Fast Sinkhorn Filter.

@@ -116,6 +116,11 @@ pub(crate) enum RefineKind {
     /// the map's size: bijective ICP alternated with coverage, continuity
     /// and smoothness repairs of both point maps on the meshes.
     Bcicp,
+    /// Smooth Shells (Eisenberger et al., CVPR 2020): shape A's smooth
+    /// shells deformed onto B's, coarse to fine, with its own
+    /// initialisation (rigid alignment and deformation proposals; the
+    /// descriptor map is one proposal).
+    SmoothShells,
 }
 
 impl RefineKind {
@@ -199,6 +204,9 @@ pub(crate) fn refinement(args: &MatchArgs) -> Result<fmaps::pipeline::Refinement
         RefineKind::None => Refinement::None,
         RefineKind::Bcicp => {
             Refinement::Custom(std::sync::Arc::new(fmaps::refine::Repair::default()))
+        }
+        RefineKind::SmoothShells => {
+            Refinement::Custom(std::sync::Arc::new(fmaps::refine::SmoothShells::default()))
         }
         RefineKind::Icp => Refinement::Icp(Icp {
             max_iterations: args.icp_iterations,

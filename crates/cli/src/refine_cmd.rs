@@ -72,6 +72,9 @@ fn refinement(args: &RefineArgs) -> Result<Refinement, Failure> {
         RefineKind::Bcicp => {
             Refinement::Custom(std::sync::Arc::new(fmaps::refine::Repair::default()))
         }
+        RefineKind::SmoothShells => {
+            Refinement::Custom(std::sync::Arc::new(fmaps::refine::SmoothShells::default()))
+        }
         RefineKind::Icp => Refinement::Icp(Icp {
             max_iterations: args.icp_iterations,
             adjoint: args.adjoint,

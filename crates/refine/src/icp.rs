@@ -128,7 +128,7 @@ impl Refiner for Icp {
 
 /// The nearest orthonormal matrix `U Vᵀ` (with the rectangular identity
 /// between them for k_B ≠ k_A): orthogonal Procrustes.
-fn nearest_orthonormal(c: DMatrix<f64>) -> DMatrix<f64> {
+pub(crate) fn nearest_orthonormal(c: DMatrix<f64>) -> DMatrix<f64> {
     let (kb, ka) = c.shape();
     let svd = c.svd(true, true);
     let (u, vt) = (svd.u.expect("u requested"), svd.v_t.expect("v_t requested"));

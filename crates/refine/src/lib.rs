@@ -24,6 +24,11 @@
 //!   Ovsjanikov, SIGGRAPH Asia 2018): bijective ICP in the spectral
 //!   domain alternated with coverage, continuity and smoothness repairs of
 //!   both point maps on the meshes ([`Refiner::refine_with_geometry`]).
+//! - [`SmoothShells`] (Eisenberger, Lähner, Cremers, CVPR 2020): the
+//!   shapes' smooth shells aligned coarse to fine by a deformation field
+//!   and a functional map in a product space, after its own
+//!   descriptor-free initialisation (rigid alignment and deformation
+//!   proposals); the strongest refiner here on non-isometric pairs.
 //!
 //! All implement [`Refiner`], so a pipeline swaps one for the other (or
 //! for its own) through a trait object. Every nearest-neighbour search is
@@ -65,6 +70,7 @@ mod icp;
 mod orientation;
 mod repair;
 mod sampling;
+mod shells;
 mod zoomout;
 
 use std::fmt;
@@ -77,6 +83,7 @@ pub use icp::Icp;
 pub use orientation::orientation_score;
 pub use repair::Repair;
 pub use sampling::farthest_point_sampling;
+pub use shells::SmoothShells;
 pub use zoomout::{Subsample, ZoomOut};
 
 /// Errors of this crate.
@@ -284,6 +291,28 @@ pub(crate) fn growth_schedule(k_start: usize, k_final: usize, step: usize) -> Ve
         out.push(k);
     }
     out
+}
+
+/// Errors unless each geometry has one vertex per basis row and its
+/// faces index those vertices.
+fn check_geometry(
+    basis_a: &SpectralBasis,
+    basis_b: &SpectralBasis,
+    geo_a: &ShapeGeometry<'_>,
+    geo_b: &ShapeGeometry<'_>,
+) -> Result<()> {
+    for (name, g, basis) in [("A", geo_a, basis_a), ("B", geo_b, basis_b)] {
+        if g.vertices.len() != basis.eigenvectors.nrows()
+            || g.faces.iter().flatten().any(|&v| v >= g.vertices.len())
+        {
+            return Err(Error::InvalidParameter(format!(
+                "shape {name}: {} vertices (faces in range?) for a basis of {} rows",
+                g.vertices.len(),
+                basis.eigenvectors.nrows()
+            )));
+        }
+    }
+    Ok(())
 }
 
 fn check_k(basis: &SpectralBasis, shape: &'static str, needed: usize) -> Result<()> {

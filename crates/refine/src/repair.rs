@@ -280,17 +280,7 @@ impl Refiner for Repair {
         }
         check_k(basis_a, "A", k)?;
         check_k(basis_b, "B", k)?;
-        for (name, g, basis) in [("A", &geo_a, basis_a), ("B", &geo_b, basis_b)] {
-            if g.vertices.len() != basis.eigenvectors.nrows()
-                || g.faces.iter().flatten().any(|&v| v >= g.vertices.len())
-            {
-                return Err(Error::InvalidParameter(format!(
-                    "shape {name}: {} vertices (faces in range?) for a basis of {} rows",
-                    g.vertices.len(),
-                    basis.eigenvectors.nrows()
-                )));
-            }
-        }
+        crate::check_geometry(basis_a, basis_b, &geo_a, &geo_b)?;
         let (ga, gb) = (Graph::new(&geo_a), Graph::new(&geo_b));
         let a = Shape {
             phi: BasisRows::new(basis_a, k),

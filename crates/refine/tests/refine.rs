@@ -554,3 +554,84 @@ fn the_repair_keeps_an_exact_map_and_repairs_a_noisy_one() {
             .is_err()
     );
 }
+
+/// A fast Smooth Shells configuration for small test meshes.
+fn shells() -> fmaps_refine::SmoothShells {
+    fmaps_refine::SmoothShells {
+        k_max: 40,
+        levels: 12,
+        samples: 700,
+        init_samples: 400,
+        proposals: 12,
+        ..Default::default()
+    }
+}
+
+#[test]
+fn smooth_shells_finds_the_identity_and_a_rotated_renumbered_copy() {
+    use fmaps_mesh_io::generate::{Pose, creature};
+    let a = creature(3, &Pose::walking());
+    let n = a.n_vertices();
+    // B: A turned by 110 degrees about a tilted axis, moved, renumbered.
+    let axis = nalgebra::Vector3::new(0.3, 1.0, -0.4).normalize();
+    let rot = nalgebra::Rotation3::from_axis_angle(&nalgebra::Unit::new_normalize(axis), 1.92);
+    let mut perm: Vec<usize> = (0..n).collect();
+    let mut state = 99u64;
+    for i in (1..n).rev() {
+        state = state
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        perm.swap(i, (state >> 33) as usize % (i + 1));
+    }
+    let mut inv = vec![0; n];
+    for (new, &old) in perm.iter().enumerate() {
+        inv[old] = new;
+    }
+    let vb: Vec<[f64; 3]> = perm
+        .iter()
+        .map(|&o| {
+            let p = rot * nalgebra::Vector3::from(a.vertices()[o]);
+            [p[0] + 3.0, p[1] - 1.0, p[2] + 0.5]
+        })
+        .collect();
+    let fb: Vec<[usize; 3]> = a
+        .faces()
+        .iter()
+        .map(|t| [inv[t[0]], inv[t[1]], inv[t[2]]])
+        .collect();
+    let b = TriMesh::new(vb, fb).unwrap();
+    let k = shells().k_max + 9;
+    let (ba, bb) = (basis(&a, k), basis(&b, k));
+    let id = DMatrix::<f64>::identity(20, 20);
+    // A shape to itself: exactly the identity.
+    let r = shells()
+        .refine_with_geometry(&id, &ba, &ba, geometry(&a), geometry(&a))
+        .unwrap();
+    assert!(r.t_ba.iter().enumerate().all(|(y, &x)| x == y));
+    // The moved copy: the rigid step turns it back, the alignment finds
+    // the renumbering (the input map, the identity, is wrong for it and
+    // only one proposal among others).
+    let r = shells()
+        .refine_with_geometry(&id, &ba, &bb, geometry(&a), geometry(&b))
+        .unwrap();
+    let right = r.t_ba.iter().zip(&perm).filter(|(x, y)| x == y).count();
+    assert!(
+        right as f64 > 0.99 * n as f64,
+        "{right} of {n} vertices right"
+    );
+    assert_eq!(r.c_ab.shape(), (49, 49));
+    // It needs the geometry, bases large enough for its shells, geometry
+    // that belongs to the bases.
+    assert!(shells().refine(&id, &ba, &bb).is_err());
+    let small = basis(&a, 30);
+    assert!(matches!(
+        shells().refine_with_geometry(&id, &small, &bb, geometry(&a), geometry(&b)),
+        Err(Error::NotEnoughEigenpairs { needed: 49, .. })
+    ));
+    let tiny = fmaps_mesh_io::generate::icosphere(1.0, 1);
+    assert!(
+        shells()
+            .refine_with_geometry(&id, &ba, &bb, geometry(&tiny), geometry(&b))
+            .is_err()
+    );
+}

@@ -1,0 +1,568 @@
+//! One level of the Smooth Shells alignment: shells, product embedding,
+//! correspondences, deformation and functional map; the geometry helpers
+//! (normals, ARAP rotations) it needs.
+
+use faer::Mat;
+use fmaps_nn::{NnParams, nearest_rows};
+use nalgebra::{DMatrix, Matrix3, Vector3};
+
+use crate::icp::nearest_orthonormal;
+use crate::{RefineReport, Result};
+
+/// The sigmoid weights of the shell of size `k` (the paper's smooth
+/// truncation of the spectrum): 1/2 at eigenfunction `k`, rising to ≈ 1
+/// below it and falling to 1% at `k + 9` (at `2k − 1` for `k < 10`).
+pub(crate) fn shell_weights(k: usize) -> Vec<f64> {
+    const TRUNCATION: f64 = 1e-2;
+    const WIDTH: usize = 10;
+    if k <= 1 {
+        return vec![1.0];
+    }
+    let half = if k >= WIDTH { WIDTH - 1 } else { k - 1 };
+    let t = -(1.0 / (1.0 - TRUNCATION) - 1.0).ln() / half as f64;
+    (-(k as i64 - 1)..=half as i64)
+        .map(|j| 1.0 / (1.0 + (t * j as f64).exp()))
+        .collect()
+}
+
+/// A shape prepared for the alignment: normalised vertices, basis, mass.
+#[derive(Clone)]
+pub(crate) struct Shell<'a> {
+    /// Vertices, centred at the area-weighted centroid and scaled to unit
+    /// area (and, for the shape that moves, rotated by the rigid step).
+    pub verts: Vec<[f64; 3]>,
+    pub faces: &'a [[usize; 3]],
+    /// Φ (n x K), M-orthonormal.
+    pub phi: &'a DMatrix<f64>,
+    pub mass: &'a [f64],
+    /// Eigenvalues times the shape's area (scale-free).
+    pub evals: Vec<f64>,
+    /// Φᵀ M V (K x 3): the spectral coefficients of the coordinates.
+    pub xi: DMatrix<f64>,
+    /// Per vertex, the neighbours (for ARAP).
+    pub neighbours: Vec<Vec<usize>>,
+}
+
+impl<'a> Shell<'a> {
+    pub fn new(
+        verts: &[[f64; 3]],
+        faces: &'a [[usize; 3]],
+        phi: &'a DMatrix<f64>,
+        mass: &'a [f64],
+        evals: &[f64],
+    ) -> Shell<'a> {
+        let area = surface_area(verts, faces).max(f64::MIN_POSITIVE);
+        let total: f64 = mass.iter().sum();
+        let mut c = [0.0; 3];
+        for (v, &m) in verts.iter().zip(mass) {
+            for d in 0..3 {
+                c[d] += m * v[d] / total;
+            }
+        }
+        let s = 1.0 / area.sqrt();
+        let verts: Vec<[f64; 3]> = verts
+            .iter()
+            .map(|v| [(v[0] - c[0]) * s, (v[1] - c[1]) * s, (v[2] - c[2]) * s])
+            .collect();
+        let mut neighbours = vec![Vec::new(); verts.len()];
+        for f in faces {
+            for e in 0..3 {
+                let (i, j) = (f[e], f[(e + 1) % 3]);
+                if !neighbours[i].contains(&j) {
+                    neighbours[i].push(j);
+                    neighbours[j].push(i);
+                }
+            }
+        }
+        let mut shell = Shell {
+            verts,
+            faces,
+            phi,
+            mass,
+            evals: evals.iter().map(|l| l * total).collect(),
+            xi: DMatrix::zeros(0, 3),
+            neighbours,
+        };
+        shell.update_xi();
+        shell
+    }
+
+    /// Recomputes Φᵀ M V after the vertices moved.
+    pub fn update_xi(&mut self) {
+        let v = DMatrix::from_fn(self.verts.len(), 3, |r, d| self.mass[r] * self.verts[r][d]);
+        self.xi = mul(self.phi, true, &v);
+    }
+
+    /// A copy rotated by `r`.
+    pub fn clone_rotated(&self, r: &Matrix3<f64>) -> Shell<'a> {
+        let mut s = self.clone();
+        s.rotate(r);
+        s
+    }
+
+    /// Applies a rotation to the vertices (about the origin).
+    pub fn rotate(&mut self, r: &Matrix3<f64>) {
+        for v in &mut self.verts {
+            let p = r * Vector3::new(v[0], v[1], v[2]);
+            *v = [p[0], p[1], p[2]];
+        }
+        self.update_xi();
+    }
+
+    /// The shell with weights `w`: `Φ[:, :k'] diag(w) ξ[:k']`.
+    pub fn shell(&self, w: &[f64]) -> Vec<[f64; 3]> {
+        let kk = w.len().min(self.phi.ncols());
+        let coef = DMatrix::from_fn(kk, 3, |i, d| w[i] * self.xi[(i, d)]);
+        points(&mul(&self.phi.columns(0, kk).into_owned(), false, &coef))
+    }
+
+    /// `base + Φ[:, :k] τ[:k]`.
+    pub fn deform(&self, base: &[[f64; 3]], tau: &DMatrix<f64>, k: usize) -> Vec<[f64; 3]> {
+        let k = k.min(tau.nrows()).min(self.phi.ncols());
+        let d = mul(
+            &self.phi.columns(0, k).into_owned(),
+            false,
+            &tau.rows(0, k).into_owned(),
+        );
+        base.iter()
+            .enumerate()
+            .map(|(r, b)| [b[0] + d[(r, 0)], b[1] + d[(r, 1)], b[2] + d[(r, 2)]])
+            .collect()
+    }
+}
+
+/// `a b` (or `aᵀ b` with `transpose_a`) by faer's GEMM.
+pub(crate) fn mul(a: &DMatrix<f64>, transpose_a: bool, b: &DMatrix<f64>) -> DMatrix<f64> {
+    use faer::linalg::matmul::matmul;
+    let ar = faer::MatRef::from_column_major_slice(a.as_slice(), a.nrows(), a.ncols());
+    let ar = if transpose_a { ar.transpose() } else { ar };
+    let mut out = DMatrix::zeros(ar.nrows(), b.ncols());
+    let par = if ar.nrows() * ar.ncols() * b.ncols() >= 1 << 20 {
+        faer::Par::rayon(0)
+    } else {
+        faer::Par::Seq
+    };
+    matmul(
+        faer::MatMut::from_column_major_slice_mut(out.as_mut_slice(), ar.nrows(), b.ncols()),
+        faer::Accum::Replace,
+        ar,
+        faer::MatRef::from_column_major_slice(b.as_slice(), b.nrows(), b.ncols()),
+        1.0,
+        par,
+    );
+    out
+}
+
+fn points(m: &DMatrix<f64>) -> Vec<[f64; 3]> {
+    (0..m.nrows())
+        .map(|r| [m[(r, 0)], m[(r, 1)], m[(r, 2)]])
+        .collect()
+}
+
+/// Total area of a triangle mesh.
+pub(crate) fn surface_area(verts: &[[f64; 3]], faces: &[[usize; 3]]) -> f64 {
+    faces
+        .iter()
+        .map(|f| {
+            let (a, b, c) = (v3(verts[f[0]]), v3(verts[f[1]]), v3(verts[f[2]]));
+            0.5 * (b - a).cross(&(c - a)).norm()
+        })
+        .sum()
+}
+
+fn v3(p: [f64; 3]) -> Vector3<f64> {
+    Vector3::new(p[0], p[1], p[2])
+}
+
+/// Area-weighted vertex normals, oriented outwards (a closed mesh whose
+/// signed volume is negative has its normals flipped).
+pub(crate) fn normals(verts: &[[f64; 3]], faces: &[[usize; 3]]) -> Vec<[f64; 3]> {
+    let mut n = vec![Vector3::zeros(); verts.len()];
+    let mut volume = 0.0;
+    for f in faces {
+        let (a, b, c) = (v3(verts[f[0]]), v3(verts[f[1]]), v3(verts[f[2]]));
+        let fnrm = (b - a).cross(&(c - a));
+        volume += a.dot(&b.cross(&c));
+        for &i in f {
+            n[i] += fnrm;
+        }
+    }
+    let sign = if volume < 0.0 { -1.0 } else { 1.0 };
+    n.iter()
+        .map(|v| {
+            let l = v.norm();
+            if l > 0.0 {
+                let u = v * (sign / l);
+                [u[0], u[1], u[2]]
+            } else {
+                [0.0; 3]
+            }
+        })
+        .collect()
+}
+
+/// Weights of one level's energies.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct LevelWeights {
+    /// Spectral features relative to the coordinates (the paper's 0.25).
+    pub features: f64,
+    /// Normals relative to the coordinates (0 at k ≤ 10).
+    pub normals: f64,
+    /// Laplacian commutativity in the functional map fit (0: none).
+    pub laplacian: f64,
+    /// ARAP weight relative to the data term (0: none).
+    pub arap: f64,
+}
+
+/// The functional map the features come from: `C` (k' x k' with
+/// `Φ_X C ≈ Φ_Y ∘ π`), the shell size `k` it was fitted at and that
+/// level's weights.
+#[derive(Debug, Clone)]
+pub(crate) struct FeatureMap {
+    pub c: DMatrix<f64>,
+    pub k: usize,
+    pub weights: Vec<f64>,
+}
+
+/// Rows `[p, fn · n, ff · F]` of the product embedding (`F` has a row
+/// per entry of `idx`).
+fn embed(
+    idx: &[usize],
+    pts: &[[f64; 3]],
+    nrm: &[[f64; 3]],
+    fn_: f64,
+    feat: Option<(&DMatrix<f64>, f64)>,
+) -> Mat<f64> {
+    let kf = feat.map_or(0, |(f, _)| f.ncols());
+    Mat::from_fn(idx.len(), 6 + kf, |r, c| {
+        let i = idx[r];
+        match c {
+            0..=2 => pts[i][c],
+            3..=5 => fn_ * nrm[i][c - 3],
+            _ => {
+                let (f, s) = feat.expect("features");
+                s * f[(r, c - 6)]
+            }
+        }
+    })
+}
+
+fn frob(p: &[[f64; 3]], idx: &[usize]) -> f64 {
+    idx.iter()
+        .map(|&i| p[i][0].powi(2) + p[i][1].powi(2) + p[i][2].powi(2))
+        .sum::<f64>()
+        .sqrt()
+}
+
+/// The spectral features of the samples `idx` of one shape: rows of
+/// `Φ[:, :k'] C[:, :k] diag(w)` (X, with `c`) or `Φ[:, :k] diag(w)` (Y).
+fn features(
+    s: &Shell<'_>,
+    idx: &[usize],
+    fm: &FeatureMap,
+    c: Option<&DMatrix<f64>>,
+) -> DMatrix<f64> {
+    let k = fm.k;
+    match c {
+        Some(c) => {
+            let kk = c.nrows();
+            let rows = DMatrix::from_fn(idx.len(), kk, |r, i| s.phi[(idx[r], i)]);
+            let mut f = rows * c.columns(0, k);
+            for j in 0..k {
+                f.column_mut(j).scale_mut(fm.weights[j]);
+            }
+            f
+        }
+        None => DMatrix::from_fn(idx.len(), k, |r, j| s.phi[(idx[r], j)] * fm.weights[j]),
+    }
+}
+
+/// The state carried from level to level.
+pub(crate) struct Alignment {
+    /// Deformation coefficients (K x 3) of X's shell.
+    pub tau: DMatrix<f64>,
+    /// The functional map of the last level.
+    pub fmap: Option<FeatureMap>,
+    /// A functional map block fixed while k ≤ 20 (from the initialisation).
+    pub cfix: Option<DMatrix<f64>>,
+}
+
+/// Brute force: on these product embeddings (a few thousand rows, 6 to
+/// 200+ columns) it measured twice as fast as the tree the automatic
+/// choice takes.
+fn brute() -> NnParams {
+    NnParams::with_strategy(fmaps_nn::NnStrategy::Brute)
+}
+
+/// Correspondences of the samples in the product embedding: for each X
+/// sample a Y sample and for each Y sample an X sample (vertex indices).
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn correspondences(
+    x: &Shell<'_>,
+    y: &Shell<'_>,
+    px: &[[f64; 3]],
+    py: &[[f64; 3]],
+    sx: &[usize],
+    sy: &[usize],
+    w: &LevelWeights,
+    fmap: Option<&FeatureMap>,
+    report: &mut RefineReport,
+) -> Result<(Vec<usize>, Vec<usize>)> {
+    let (nx, ny) = (normals(px, x.faces), normals(py, y.faces));
+    let (vx, vy) = (frob(px, sx), frob(py, sy));
+    let fnx = w.normals * vx / frob(&nx, sx).max(f64::MIN_POSITIVE);
+    let fny = w.normals * vy / frob(&ny, sy).max(f64::MIN_POSITIVE);
+    let fnm = 0.5 * (fnx + fny);
+    let feats = fmap.map(|fm| (features(x, sx, fm, Some(&fm.c)), features(y, sy, fm, None)));
+    let (fx, fy) = match &feats {
+        Some((fx, fy)) => {
+            let (nfx, nfy) = (fx.norm(), fy.norm());
+            let s = 0.5
+                * (w.features * vx / nfx.max(f64::MIN_POSITIVE)
+                    + w.features * vy / nfy.max(f64::MIN_POSITIVE));
+            (Some((fx, s)), Some((fy, s)))
+        }
+        None => (None, None),
+    };
+    let ex = embed(sx, px, &nx, fnm, fx);
+    let ey = embed(sy, py, &ny, fnm, fy);
+    let t = std::time::Instant::now();
+    let search = |d: &Mat<f64>, q: &Mat<f64>| {
+        nearest_rows(d.as_ref(), q.as_ref(), None, &brute()).map_err(fmaps_solve::Error::Search)
+    };
+    let (ab, ba) = rayon::join(|| search(&ey, &ex), || search(&ex, &ey));
+    report.nn_searches += 2;
+    report.nn_seconds += t.elapsed().as_secs_f64();
+    let ab: Vec<usize> = ab?.into_iter().map(|j| sy[j]).collect();
+    let ba: Vec<usize> = ba?.into_iter().map(|j| sx[j]).collect();
+    Ok((ab, ba))
+}
+
+/// Per-vertex ARAP rotations from `rest` to `cur` (one-ring Procrustes).
+fn rotations(rest: &[[f64; 3]], cur: &[[f64; 3]], nb: &[Vec<usize>]) -> Vec<Matrix3<f64>> {
+    (0..rest.len())
+        .map(|i| {
+            let mut s = Matrix3::zeros();
+            for &j in &nb[i] {
+                let e = v3(rest[i]) - v3(rest[j]);
+                let ed = v3(cur[i]) - v3(cur[j]);
+                s += e * ed.transpose();
+            }
+            let svd = s.svd(true, true);
+            let (u, vt) = (svd.u.expect("u"), svd.v_t.expect("v_t"));
+            let mut r = vt.transpose() * u.transpose();
+            if r.determinant() < 0.0 {
+                let mut v = vt.transpose();
+                v.column_mut(2).neg_mut();
+                r = v * u.transpose();
+            }
+            r
+        })
+        .collect()
+}
+
+/// Both shapes' shells of one size and its weights.
+pub(crate) struct Shells {
+    pub weights: Vec<f64>,
+    pub x: Vec<[f64; 3]>,
+    pub y: Vec<[f64; 3]>,
+}
+
+impl Shells {
+    pub fn new(x: &Shell<'_>, y: &Shell<'_>, k: usize) -> Shells {
+        let weights = shell_weights(k);
+        Shells {
+            x: x.shell(&weights),
+            y: y.shell(&weights),
+            weights,
+        }
+    }
+}
+
+/// One level of the alignment at shell size `k` (weights `wk`): the
+/// correspondences, then the deformation τ (least squares of both
+/// directions' residuals, plus ARAP), then the functional map (least
+/// squares on the correspondences, made orthonormal).
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn level(
+    x: &Shell<'_>,
+    y: &Shell<'_>,
+    shells: &Shells,
+    sx: &[usize],
+    sy: &[usize],
+    k: usize,
+    w: &LevelWeights,
+    arap_gram: Option<&DMatrix<f64>>,
+    state: &mut Alignment,
+    report: &mut RefineReport,
+) -> Result<(Vec<usize>, Vec<usize>)> {
+    let (wk, xs, ys) = (&shells.weights, &shells.x, &shells.y);
+    let kk = wk.len().min(x.phi.ncols()).min(y.phi.ncols());
+    let kd = k.min(kk);
+    let cur = x.deform(xs, &state.tau, kd);
+    let (ab, ba) = correspondences(x, y, &cur, ys, sx, sy, w, state.fmap.as_ref(), report)?;
+
+    // Deformation: Σ ‖XS(s) + Φ(s)τ − YS(π s)‖² over both directions.
+    let pairs: Vec<(usize, usize)> = sx
+        .iter()
+        .copied()
+        .zip(ab.iter().copied())
+        .chain(ba.iter().copied().zip(sy.iter().copied()))
+        .collect();
+    let a = DMatrix::from_fn(pairs.len(), kd, |r, i| x.phi[(pairs[r].0, i)]);
+    let res = DMatrix::from_fn(pairs.len(), 3, |r, d| {
+        let (xi, yi) = pairs[r];
+        ys[yi][d] - xs[xi][d]
+    });
+    let mut m = mul(&a, true, &a);
+    let mut z = mul(&a, true, &res);
+    if let (Some(g), true) = (arap_gram, w.arap > 0.0) {
+        let ga = g.view((0, 0), (kd, kd));
+        let rot = rotations(xs, &cur, &x.neighbours);
+        let mut b = vec![Vector3::zeros(); xs.len()];
+        for (i, nb) in x.neighbours.iter().enumerate() {
+            for &j in nb {
+                let e = v3(xs[i]) - v3(xs[j]);
+                let t = (rot[i] - Matrix3::identity()) * e;
+                b[i] += t;
+                b[j] -= t;
+            }
+        }
+        let bm = DMatrix::from_fn(b.len(), 3, |r, d| b[r][d]);
+        let za = mul(&x.phi.columns(0, kd).into_owned(), true, &bm);
+        let s = w.arap * inf_norm(&m) / inf_norm(&ga.into_owned()).max(f64::MIN_POSITIVE);
+        m += ga * s;
+        z += za * s;
+    }
+    let reg = 1e-10 * inf_norm(&m).max(1e-300);
+    m += DMatrix::identity(kd, kd) * reg;
+    if let Some(sol) = m.clone().cholesky().map(|c| c.solve(&z)) {
+        state.tau.view_mut((0, 0), (kd, 3)).copy_from(&sol);
+    }
+
+    // Functional map on the correspondences (area weighted).
+    let ax = DMatrix::from_fn(pairs.len(), kk, |r, c| {
+        let i = pairs[r].0;
+        x.mass[i].sqrt() * x.phi[(i, c)]
+    });
+    let ay = DMatrix::from_fn(pairs.len(), kk, |r, c| {
+        let (i, j) = pairs[r];
+        x.mass[i].sqrt() * y.phi[(j, c)]
+    });
+    let mm = mul(&ax, true, &ax);
+    let zz = mul(&ax, true, &ay);
+    let mut c = DMatrix::<f64>::zeros(kk, kk);
+    if w.laplacian > 0.0 {
+        let l = DMatrix::from_fn(kk, kk, |i, j| (x.evals[i] - y.evals[j]).abs().sqrt());
+        let lmean = l.mean().max(f64::MIN_POSITIVE);
+        let mabs = mm.abs().mean();
+        for j in 0..kk {
+            let mut a = mm.clone();
+            for i in 0..kk {
+                a[(i, i)] += w.laplacian / lmean * mabs * l[(i, j)];
+            }
+            if let Some(ch) = a.cholesky() {
+                c.set_column(j, &ch.solve(&zz.column(j).into_owned()));
+            }
+        }
+    } else if let Some(ch) =
+        (mm.clone() + DMatrix::identity(kk, kk) * 1e-12 * inf_norm(&mm)).cholesky()
+    {
+        c = ch.solve(&zz);
+    }
+    let mut c = nearest_orthonormal(c);
+    if let Some(fix) = state.cfix.as_ref().filter(|_| k <= 20) {
+        let f = fix.nrows().min(kk);
+        c.view_mut((0, 0), (f, kk)).fill(0.0);
+        c.view_mut((0, 0), (kk, f)).fill(0.0);
+        c.view_mut((0, 0), (f, f))
+            .copy_from(&fix.view((0, 0), (f, f)));
+        if kk > f {
+            let rest = nearest_orthonormal(c.view((f, f), (kk - f, kk - f)).into_owned());
+            c.view_mut((f, f), (kk - f, kk - f)).copy_from(&rest);
+        }
+    }
+    state.fmap = Some(FeatureMap {
+        c,
+        k: kd,
+        weights: wk[..kk].to_vec(),
+    });
+    Ok((ab, ba))
+}
+
+fn inf_norm(m: &DMatrix<f64>) -> f64 {
+    m.row_iter()
+        .map(|r| r.iter().map(|x| x.abs()).sum::<f64>())
+        .fold(0.0, f64::max)
+}
+
+/// `2 Φᵀ L Φ` for the uniform graph Laplacian L of the mesh edges: the
+/// Gram matrix of the ARAP term's Jacobian in the deformation basis.
+pub(crate) fn arap_gram(x: &Shell<'_>, k: usize) -> DMatrix<f64> {
+    let k = k.min(x.phi.ncols());
+    let n = x.verts.len();
+    let lphi = DMatrix::from_fn(n, k, |i, c| {
+        x.neighbours[i]
+            .iter()
+            .map(|&j| x.phi[(i, c)] - x.phi[(j, c)])
+            .sum::<f64>()
+    });
+    mul(&x.phi.columns(0, k).into_owned(), true, &lphi) * 2.0
+}
+
+/// The alignment energy of a result (the initialisation's score): the
+/// area-weighted mean distance, over both directions' correspondences,
+/// between matched points and normals of the deformed X and of Y at full
+/// detail. Also returns the correspondences.
+pub(crate) fn alignment_energy(
+    x: &Shell<'_>,
+    y: &Shell<'_>,
+    sx: &[usize],
+    sy: &[usize],
+    state: &Alignment,
+    w: &LevelWeights,
+    report: &mut RefineReport,
+) -> Result<f64> {
+    let k = state.fmap.as_ref().map_or(state.tau.nrows(), |f| f.k);
+    let cur = x.deform(&x.verts, &state.tau, k);
+    let (ab, ba) = correspondences(x, y, &cur, &y.verts, sx, sy, w, state.fmap.as_ref(), report)?;
+    let (nx, ny) = (normals(&cur, x.faces), normals(&y.verts, y.faces));
+    let fn_ = 0.5
+        * w.normals
+        * (frob(&cur, sx) / frob(&nx, sx).max(f64::MIN_POSITIVE)
+            + frob(&y.verts, sy) / frob(&ny, sy).max(f64::MIN_POSITIVE));
+    let dist = |i: usize, j: usize| {
+        let mut s = 0.0;
+        for d in 0..3 {
+            s += (cur[i][d] - y.verts[j][d]).powi(2) + (fn_ * (nx[i][d] - ny[j][d])).powi(2);
+        }
+        s.sqrt()
+    };
+    let mut e = 0.0;
+    for (&i, &j) in sx.iter().zip(&ab) {
+        e += x.mass[i] * dist(i, j);
+    }
+    for (&i, &j) in ba.iter().zip(sy) {
+        e += y.mass[j] * dist(i, j);
+    }
+    Ok(e / (sx.len() + sy.len()) as f64)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn shell_weights_are_a_sigmoid_cut_at_k() {
+        let w = shell_weights(30);
+        assert_eq!(w.len(), 39);
+        assert!((w[29] - 0.5).abs() < 1e-12, "1/2 at eigenfunction k");
+        assert!((w[38] - 0.01).abs() < 1e-9, "1% at k + 9");
+        assert!(w[0] > 0.9999);
+        assert!(w.windows(2).all(|p| p[0] > p[1]));
+        let w = shell_weights(4);
+        assert_eq!(w.len(), 7);
+        assert!((w[3] - 0.5).abs() < 1e-12 && (w[6] - 0.01).abs() < 1e-9);
+        assert_eq!(shell_weights(1), vec![1.0]);
+    }
+}
