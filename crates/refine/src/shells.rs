@@ -22,20 +22,28 @@
 //! search): a rigid alignment (main axes from the second eigenfunction,
 //! the eight orientations about them refined by ICP about the main axis,
 //! each scored by a short surrogate alignment over shells 2..20), then
-//! proposals for the coarse deformation `τ[:6]` (random, scaled by the
-//! shell's own coefficients; one unperturbed; and the input functional map
-//! when the refiner is given one), each aligned over shells 6..20 and
-//! scored by the alignment energy (area-weighted distance of matched
-//! points and normals). The best proposal's τ and functional map start the
-//! full alignment (the map is held fixed up to shell 20). Proposals run in
-//! parallel.
+//! proposals, each aligned over shells 6..20 and scored by the alignment
+//! energy (area-weighted distance of matched points and normals, both
+//! directions, at full detail): the unperturbed shell; random coarse
+//! deformations `τ[:6]` (scaled by the shell's own coefficients, half of
+//! them with Laplacian commutativity in the map fit, as in the authors'
+//! code); the sign hypotheses of φ_2..φ_6 (every choice of signs as the
+//! first features' map, the "eigenfunction sign choices"); and
+//! the input functional map. The best proposal's τ and functional map
+//! start the full alignment (the map is held fixed up to shell 20).
+//! Proposals and orientations run in parallel.
 //!
 //! Where this differs from the paper's description: the alignment levels
 //! use `samples` farthest-point samples of each shape (the paper's
 //! initialisation uses 1000 samples, its main run all vertices) and the
-//! final map is computed on all vertices; the functional map fit uses the
-//! correspondences only (the paper's released code adds SHOT and HKS
-//! descriptor terms); the proposals are independent draws, best kept.
+//! final map is computed on all vertices; the largest shell is 191 by
+//! default (the paper: 500), so that the pipeline's 200 eigenpairs
+//! suffice; the functional map fit uses the correspondences only (the
+//! authors' code adds SHOT and HKS descriptor terms); the ARAP term is
+//! the classic local/global one (per-vertex rotations by Procrustes, then
+//! least squares in τ); the proposals are independent draws, the best
+//! kept (optionally the best `finalists` run the whole alignment and the
+//! lowest final energy wins).
 
 mod level;
 
@@ -354,7 +362,11 @@ impl SmoothShells {
                     tau[(i, d)] = sigma[i] * rng.normal();
                 }
             }
-            let lap = if starts.len().is_multiple_of(2) { 0.0 } else { 10.0 };
+            let lap = if starts.len().is_multiple_of(2) {
+                0.0
+            } else {
+                10.0
+            };
             starts.push((
                 Alignment {
                     tau,
