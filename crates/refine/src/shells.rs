@@ -71,7 +71,9 @@ pub struct SmoothShells {
     pub samples: usize,
     /// Samples per shape in the initialisation (the paper: 1000).
     pub init_samples: usize,
-    /// Deformation proposals of the initialisation (the paper: 100).
+    /// Random deformation proposals of the initialisation (the paper:
+    /// 100), besides the unperturbed shell, the sign hypotheses and the
+    /// input map.
     pub proposals: usize,
     /// Seed of the proposals (the result is deterministic for a seed).
     pub seed: u64,
@@ -303,11 +305,6 @@ impl SmoothShells {
             .map(|i| if i == 0 { 0.0 } else { x.xi.row(i).norm() })
             .collect();
         let mut rng = Rng(self.seed);
-        let sign_count = if self.sign_hypotheses > 0 {
-            1usize << ((self.sign_hypotheses + 1).min(K_MIN) - 1)
-        } else {
-            0
-        };
         let mut starts: Vec<(Alignment, f64)> = Vec::new();
         let zero = || DMatrix::<f64>::zeros(kt, 3);
         starts.push((
@@ -355,7 +352,8 @@ impl SmoothShells {
                 ));
             }
         }
-        while starts.len() < self.proposals.max(1) + sign_count {
+        let fixed = starts.len();
+        while starts.len() < fixed + self.proposals {
             let mut tau = zero();
             for i in 1..K_MIN {
                 for d in 0..3 {
