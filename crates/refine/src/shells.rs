@@ -288,8 +288,8 @@ impl SmoothShells {
         Ok(())
     }
 
-    /// The proposals of the initialisation; returns the best one's τ and
-    /// functional map.
+    /// The proposals of the initialisation; returns the best `finalists`
+    /// (τ and the functional map to hold fixed up to shell 20), best first.
     fn initialise(
         &self,
         x: &Shell<'_>,
