@@ -293,6 +293,14 @@ pub(crate) fn growth_schedule(k_start: usize, k_final: usize, step: usize) -> Ve
     out
 }
 
+/// The error of [`Refiner::refine`] for a refiner that works on the
+/// surfaces as well (`what` names it).
+fn needs_geometry(what: &str) -> Error {
+    Error::InvalidParameter(format!(
+        "{what} works on the shapes as well as their bases: call refine_with_geometry"
+    ))
+}
+
 /// Errors unless each geometry has one vertex per basis row and its
 /// faces index those vertices.
 fn check_geometry(

@@ -258,9 +258,7 @@ impl Refiner for Repair {
         _basis_a: &SpectralBasis,
         _basis_b: &SpectralBasis,
     ) -> Result<Refined> {
-        Err(Error::InvalidParameter(
-            "the BCICP-class repair works on the shapes as well as their bases: call refine_with_geometry".into(),
-        ))
+        Err(crate::needs_geometry("the BCICP-class repair"))
     }
 
     fn refine_with_geometry(

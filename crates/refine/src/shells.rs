@@ -521,9 +521,7 @@ impl Refiner for SmoothShells {
         _basis_a: &SpectralBasis,
         _basis_b: &SpectralBasis,
     ) -> Result<Refined> {
-        Err(Error::InvalidParameter(
-            "Smooth Shells aligns the shapes themselves: call refine_with_geometry".into(),
-        ))
+        Err(crate::needs_geometry("Smooth Shells"))
     }
 
     fn refine_with_geometry(
@@ -604,8 +602,8 @@ impl Refiner for SmoothShells {
         let fm = state.fmap.clone().expect("at least one level ran");
         let wk = level::shell_weights(self.k_max);
         let xs = x.shell(&wk);
-        let cur = x.deform(&xs, &state.tau, fm.k);
-        let ys = y.shell(&wk);
+        let cur = level::Posed::new(x.deform(&xs, &state.tau, fm.k), x.faces);
+        let ys = level::Posed::new(y.shell(&wk), y.faces);
         let all_x: Vec<usize> = (0..x.verts.len()).collect();
         let all_y: Vec<usize> = (0..y.verts.len()).collect();
         let w = LevelWeights {

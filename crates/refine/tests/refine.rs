@@ -30,6 +30,24 @@ fn basis(mesh: &TriMesh, k: usize) -> SpectralBasis {
         .unwrap()
 }
 
+/// A fixed pseudo-random permutation `perm[new] = old` of `0..n` (from
+/// `seed`) and its inverse.
+fn permutation(n: usize, seed: u64) -> (Vec<usize>, Vec<usize>) {
+    let mut perm: Vec<usize> = (0..n).collect();
+    let mut state = seed;
+    for i in (1..n).rev() {
+        state = state
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        perm.swap(i, (state >> 33) as usize % (i + 1));
+    }
+    let mut inv = vec![0; n];
+    for (new, &old) in perm.iter().enumerate() {
+        inv[old] = new;
+    }
+    (perm, inv)
+}
+
 /// `deformed`: B is a differently bumped, bent torus (nearly isometric);
 /// otherwise B is A stretched by a few percent, which the low spectrum
 /// does not see (the true map converts exactly).
@@ -41,19 +59,7 @@ fn pair(k: usize, deformed: bool) -> Pair {
     }
     let a = TriMesh::new(v.clone(), f.clone()).unwrap();
     let n = v.len();
-    // perm[new] = old, a fixed pseudo-random permutation.
-    let mut perm: Vec<usize> = (0..n).collect();
-    let mut state = 12345u64;
-    for i in (1..n).rev() {
-        state = state
-            .wrapping_mul(6364136223846793005)
-            .wrapping_add(1442695040888963407);
-        perm.swap(i, (state >> 33) as usize % (i + 1));
-    }
-    let mut inv = vec![0; n];
-    for (new, &old) in perm.iter().enumerate() {
-        inv[old] = new;
-    }
+    let (perm, inv) = permutation(n, 12345);
     // B: the plain torus with other bumps and a bend, so the shapes are
     // only nearly isometric.
     let (v0, _) = torus(2.0, 0.8, 44, 18).into_parts();
@@ -575,18 +581,7 @@ fn smooth_shells_finds_the_identity_and_a_rotated_renumbered_copy() {
     // B: A turned by 110 degrees about a tilted axis, moved, renumbered.
     let axis = nalgebra::Vector3::new(0.3, 1.0, -0.4).normalize();
     let rot = nalgebra::Rotation3::from_axis_angle(&nalgebra::Unit::new_normalize(axis), 1.92);
-    let mut perm: Vec<usize> = (0..n).collect();
-    let mut state = 99u64;
-    for i in (1..n).rev() {
-        state = state
-            .wrapping_mul(6364136223846793005)
-            .wrapping_add(1442695040888963407);
-        perm.swap(i, (state >> 33) as usize % (i + 1));
-    }
-    let mut inv = vec![0; n];
-    for (new, &old) in perm.iter().enumerate() {
-        inv[old] = new;
-    }
+    let (perm, inv) = permutation(n, 99);
     let vb: Vec<[f64; 3]> = perm
         .iter()
         .map(|&o| {

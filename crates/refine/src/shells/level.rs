@@ -201,6 +201,28 @@ pub(crate) fn normals(verts: &[[f64; 3]], faces: &[[usize; 3]]) -> Vec<[f64; 3]>
         .collect()
 }
 
+/// Points of a shape (its shell, deformed or not) with their normals.
+pub(crate) struct Posed {
+    pub pts: Vec<[f64; 3]>,
+    pub nrm: Vec<[f64; 3]>,
+}
+
+impl Posed {
+    pub fn new(pts: Vec<[f64; 3]>, faces: &[[usize; 3]]) -> Posed {
+        let nrm = normals(&pts, faces);
+        Posed { pts, nrm }
+    }
+}
+
+/// The normals' weight in the product space: `normals` times the ratio
+/// of the coordinates' to the normals' norms on the samples, averaged
+/// over both shapes.
+fn normal_scale(px: &Posed, py: &Posed, sx: &[usize], sy: &[usize], normals: f64) -> f64 {
+    let part =
+        |p: &Posed, s: &[usize]| normals * frob(&p.pts, s) / frob(&p.nrm, s).max(f64::MIN_POSITIVE);
+    0.5 * (part(px, sx) + part(py, sy))
+}
+
 /// Weights of one level's energies.
 #[derive(Debug, Clone, Copy)]
 pub(crate) struct LevelWeights {
@@ -300,19 +322,16 @@ fn brute() -> NnParams {
 pub(crate) fn correspondences(
     x: &Shell<'_>,
     y: &Shell<'_>,
-    px: &[[f64; 3]],
-    py: &[[f64; 3]],
+    px: &Posed,
+    py: &Posed,
     sx: &[usize],
     sy: &[usize],
     w: &LevelWeights,
     fmap: Option<&FeatureMap>,
     report: &mut RefineReport,
 ) -> Result<(Vec<usize>, Vec<usize>)> {
-    let (nx, ny) = (normals(px, x.faces), normals(py, y.faces));
-    let (vx, vy) = (frob(px, sx), frob(py, sy));
-    let fnx = w.normals * vx / frob(&nx, sx).max(f64::MIN_POSITIVE);
-    let fny = w.normals * vy / frob(&ny, sy).max(f64::MIN_POSITIVE);
-    let fnm = 0.5 * (fnx + fny);
+    let (vx, vy) = (frob(&px.pts, sx), frob(&py.pts, sy));
+    let fnm = normal_scale(px, py, sx, sy, w.normals);
     let feats = fmap.map(|fm| (features(x, sx, fm, Some(&fm.c)), features(y, sy, fm, None)));
     let (fx, fy) = match &feats {
         Some((fx, fy)) => {
@@ -324,8 +343,8 @@ pub(crate) fn correspondences(
         }
         None => (None, None),
     };
-    let ex = embed(sx, px, &nx, fnm, fx);
-    let ey = embed(sy, py, &ny, fnm, fy);
+    let ex = embed(sx, &px.pts, &px.nrm, fnm, fx);
+    let ey = embed(sy, &py.pts, &py.nrm, fnm, fy);
     let t = std::time::Instant::now();
     let search = |d: &Mat<f64>, q: &Mat<f64>| {
         nearest_rows(d.as_ref(), q.as_ref(), None, &brute()).map_err(fmaps_solve::Error::Search)
@@ -365,7 +384,7 @@ fn rotations(rest: &[[f64; 3]], cur: &[[f64; 3]], nb: &[Vec<usize>]) -> Vec<Matr
 pub(crate) struct Shells {
     pub weights: Vec<f64>,
     pub x: Vec<[f64; 3]>,
-    pub y: Vec<[f64; 3]>,
+    pub y: Posed,
 }
 
 impl Shells {
@@ -373,7 +392,7 @@ impl Shells {
         let weights = shell_weights(k);
         Shells {
             x: x.shell(&weights),
-            y: y.shell(&weights),
+            y: Posed::new(y.shell(&weights), y.faces),
             weights,
         }
     }
@@ -399,7 +418,7 @@ pub(crate) fn level(
     let (wk, xs, ys) = (&shells.weights, &shells.x, &shells.y);
     let kk = wk.len().min(x.phi.ncols()).min(y.phi.ncols());
     let kd = k.min(kk);
-    let cur = x.deform(xs, &state.tau, kd);
+    let cur = Posed::new(x.deform(xs, &state.tau, kd), x.faces);
     let (ab, ba) = correspondences(x, y, &cur, ys, sx, sy, w, state.fmap.as_ref(), report)?;
 
     // Deformation: Σ ‖XS(s) + Φ(s)τ − YS(π s)‖² over both directions.
@@ -412,13 +431,13 @@ pub(crate) fn level(
     let a = DMatrix::from_fn(pairs.len(), kd, |r, i| x.phi[(pairs[r].0, i)]);
     let res = DMatrix::from_fn(pairs.len(), 3, |r, d| {
         let (xi, yi) = pairs[r];
-        ys[yi][d] - xs[xi][d]
+        ys.pts[yi][d] - xs[xi][d]
     });
     let mut m = mul(&a, true, &a);
     let mut z = mul(&a, true, &res);
     if let (Some(g), true) = (arap_gram, w.arap > 0.0) {
         let ga = g.view((0, 0), (kd, kd));
-        let rot = rotations(xs, &cur, &x.neighbours);
+        let rot = rotations(xs, &cur.pts, &x.neighbours);
         let mut b = vec![Vector3::zeros(); xs.len()];
         for (i, nb) in x.neighbours.iter().enumerate() {
             for &j in nb {
@@ -524,17 +543,15 @@ pub(crate) fn alignment_energy(
     report: &mut RefineReport,
 ) -> Result<f64> {
     let k = state.fmap.as_ref().map_or(state.tau.nrows(), |f| f.k);
-    let cur = x.deform(&x.verts, &state.tau, k);
-    let (ab, ba) = correspondences(x, y, &cur, &y.verts, sx, sy, w, state.fmap.as_ref(), report)?;
-    let (nx, ny) = (normals(&cur, x.faces), normals(&y.verts, y.faces));
-    let fn_ = 0.5
-        * w.normals
-        * (frob(&cur, sx) / frob(&nx, sx).max(f64::MIN_POSITIVE)
-            + frob(&y.verts, sy) / frob(&ny, sy).max(f64::MIN_POSITIVE));
+    let cur = Posed::new(x.deform(&x.verts, &state.tau, k), x.faces);
+    let full_y = Posed::new(y.verts.clone(), y.faces);
+    let (ab, ba) = correspondences(x, y, &cur, &full_y, sx, sy, w, state.fmap.as_ref(), report)?;
+    let fn_ = normal_scale(&cur, &full_y, sx, sy, w.normals);
+    let (cur, nx, yv, ny) = (&cur.pts, &cur.nrm, &full_y.pts, &full_y.nrm);
     let dist = |i: usize, j: usize| {
         let mut s = 0.0;
         for d in 0..3 {
-            s += (cur[i][d] - y.verts[j][d]).powi(2) + (fn_ * (nx[i][d] - ny[j][d])).powi(2);
+            s += (cur[i][d] - yv[j][d]).powi(2) + (fn_ * (nx[i][d] - ny[j][d])).powi(2);
         }
         s.sqrt()
     };
