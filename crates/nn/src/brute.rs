@@ -1,7 +1,9 @@
 //! The brute-force search: every query against every data row.
 
 use faer::linalg::matmul::matmul;
-use faer::{Accum, Mat, MatRef, Par};
+use std::cell::RefCell;
+
+use faer::{Accum, Mat, MatMut, MatRef, Par};
 use nalgebra::DMatrix;
 use rayon::prelude::*;
 
@@ -9,6 +11,12 @@ use crate::rows::{dist2_below, row_major};
 
 /// Queries per block.
 const BLOCK: usize = 256;
+
+thread_local! {
+    /// Per thread, the scores of one block (kept between searches: many
+    /// small searches would otherwise spend their time zeroing it).
+    static SCORES: RefCell<Vec<f32>> = const { RefCell::new(Vec::new()) };
+}
 
 /// Every query against every data row: blocked f32 GEMMs select the rows
 /// within [`score_err`]'s band of the best score, re-checked in f64.
@@ -58,32 +66,29 @@ impl BruteData {
         let starts: Vec<usize> = (0..nq).step_by(BLOCK).collect();
         let blocks: Vec<Vec<usize>> = starts
             .par_iter()
-            .map_init(
-                || Mat::<f32>::zeros(nx, BLOCK),
-                |buf, &q0| {
-                    let rows = BLOCK.min(nq - q0);
-                    let q = Mat::<f32>::from_fn(rows, d, |i, j| queries[(q0 + i, j)] as f32);
+            .map(|&q0| {
+                let rows = BLOCK.min(nq - q0);
+                let q = Mat::<f32>::from_fn(rows, d, |i, j| queries[(q0 + i, j)] as f32);
+                SCORES.with_borrow_mut(|buf| {
+                    // Grown, never cleared: the product overwrites it.
+                    if buf.len() < nx * rows {
+                        buf.resize(nx * rows, 0.0);
+                    }
+                    let s = MatMut::from_column_major_slice_mut(&mut buf[..nx * rows], nx, rows);
                     // Sᵀ = X Qᵀ (nx x rows): column i holds query i's cross
                     // terms, contiguous for the scans.
-                    matmul(
-                        buf.as_mut().subcols_mut(0, rows),
-                        Accum::Replace,
-                        x_mat,
-                        q.transpose(),
-                        1.0f32,
-                        Par::Seq,
-                    );
-                    let mut out = Vec::with_capacity(rows);
-                    for i in 0..rows {
-                        let qi = &q_rows[(q0 + i) * d..(q0 + i + 1) * d];
-                        let q_norm: f64 = qi.iter().map(|v| v * v).sum();
-                        let band = 4.0 * score_err(d, q_norm, x_norm_max);
-                        let col = &buf.col_as_slice(i)[..nx];
-                        out.push(brute_query(x_rows, x_norm, col, qi, band));
-                    }
-                    out
-                },
-            )
+                    matmul(s, Accum::Replace, x_mat, q.transpose(), 1.0f32, Par::Seq);
+                    (0..rows)
+                        .map(|i| {
+                            let qi = &q_rows[(q0 + i) * d..(q0 + i + 1) * d];
+                            let q_norm: f64 = qi.iter().map(|v| v * v).sum();
+                            let band = 4.0 * score_err(d, q_norm, x_norm_max);
+                            let col = &buf[i * nx..(i + 1) * nx];
+                            brute_query(x_rows, x_norm, col, qi, band)
+                        })
+                        .collect()
+                })
+            })
             .collect();
         blocks.into_iter().flatten().collect()
     }
@@ -167,21 +172,56 @@ crate::cpu::dispatched! {
     /// row: every row whose score `|x|² − 2 q·x` is within `band` of the
     /// smallest is re-checked with a direct f64 distance.
     fn brute_query(x_rows: &[f64], x_norm: &[f64], col: &[f32], qi: &[f64], band: f64) -> usize {
+        // Both scans run over eight lanes at a time (`s < l ? s : l`
+        // vectorizes to min instructions; a NaN score never wins), the
+        // second one looking inside a chunk only when a lane is in the band.
+        const L: usize = 8;
         let d = qi.len();
-        let mut best = f64::INFINITY;
-        for (xn, c) in x_norm.iter().zip(col) {
-            best = best.min(xn - 2.0 * f64::from(*c));
+        let score = |xn: f64, c: f32| xn - 2.0 * f64::from(c);
+        let full = x_norm.len() / L * L;
+        let mut lanes = [f64::INFINITY; L];
+        for (xs, cs) in x_norm[..full].chunks_exact(L).zip(col[..full].chunks_exact(L)) {
+            for ((l, &xn), &c) in lanes.iter_mut().zip(xs).zip(cs) {
+                let s = score(xn, c);
+                *l = if s < *l { s } else { *l };
+            }
         }
+        let mut best = f64::INFINITY;
+        for s in lanes
+            .into_iter()
+            .chain(x_norm[full..].iter().zip(&col[full..]).map(|(&xn, &c)| score(xn, c)))
+        {
+            best = if s < best { s } else { best };
+        }
+        let limit = best + band;
         let mut arg = usize::MAX;
         let mut best_d = f64::INFINITY;
-        for (k, (xn, c)) in x_norm.iter().zip(col).enumerate() {
-            if xn - 2.0 * f64::from(*c) <= best + band
-                && let Some(dist) = dist2_below(&x_rows[k * d..(k + 1) * d], qi, best_d)
-                && dist < best_d
+        let mut check = |k: usize, best_d: &mut f64| {
+            if score(x_norm[k], col[k]) <= limit
+                && let Some(dist) = dist2_below(&x_rows[k * d..(k + 1) * d], qi, *best_d)
+                && dist < *best_d
             {
-                best_d = dist;
+                *best_d = dist;
                 arg = k;
             }
+        };
+        for (chunk, (xs, cs)) in x_norm[..full]
+            .chunks_exact(L)
+            .zip(col[..full].chunks_exact(L))
+            .enumerate()
+        {
+            let mut any = false;
+            for (&xn, &c) in xs.iter().zip(cs) {
+                any |= score(xn, c) <= limit;
+            }
+            if any {
+                for k in chunk * L..(chunk + 1) * L {
+                    check(k, &mut best_d);
+                }
+            }
+        }
+        for k in full..x_norm.len() {
+            check(k, &mut best_d);
         }
         arg
     }

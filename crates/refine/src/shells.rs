@@ -54,7 +54,7 @@ use nalgebra::{DMatrix, Matrix3, Vector3};
 use rayon::prelude::*;
 
 use crate::{Error, Iteration, RefineReport, Refined, Refiner, Result, ShapeGeometry};
-use level::{Alignment, LevelWeights, Shell};
+use level::{Alignment, LevelWeights, Samples, Shell};
 
 /// The Smooth Shells refiner (see the module docs). With its own
 /// initialisation it needs no initial map: the input map is one of the
@@ -175,8 +175,8 @@ fn surrogate(
     x: &Shell<'_>,
     y: &Shell<'_>,
     shells: &[(usize, level::Shells)],
-    sx: &[usize],
-    sy: &[usize],
+    sx: &Samples,
+    sy: &Samples,
     align: LevelWeights,
     score: LevelWeights,
     state: &mut Alignment,
@@ -217,8 +217,8 @@ impl SmoothShells {
         &self,
         x: &mut Shell<'_>,
         y: &Shell<'_>,
-        sx: &[usize],
-        sy: &[usize],
+        sx: &Samples,
+        sy: &Samples,
         input: &level::FeatureMap,
         report: &mut RefineReport,
     ) -> Result<()> {
@@ -294,8 +294,8 @@ impl SmoothShells {
         &self,
         x: &Shell<'_>,
         y: &Shell<'_>,
-        sx: &[usize],
-        sy: &[usize],
+        sx: &Samples,
+        sy: &Samples,
         input: Option<&level::FeatureMap>,
         report: &mut RefineReport,
     ) -> Result<Vec<Alignment>> {
@@ -420,8 +420,8 @@ impl SmoothShells {
         &self,
         x: &Shell<'_>,
         y: &Shell<'_>,
-        (sx, sy): (&[usize], &[usize]),
-        (ix, iy): (&[usize], &[usize]),
+        (sx, sy): (&Samples, &Samples),
+        (ix, iy): (&Samples, &Samples),
         gram: &DMatrix<f64>,
         mut state: Alignment,
         report: &mut RefineReport,
@@ -558,7 +558,7 @@ impl Refiner for SmoothShells {
         let fps = |s: &Shell<'_>, n: usize| {
             let mut v = crate::farthest_point_sampling(&s.verts, n, 0);
             v.sort_unstable();
-            v
+            Samples::new(s, v)
         };
         let (ix, iy) = (fps(&x, self.init_samples), fps(&y, self.init_samples));
         // The input C_AB (k_B x k_A) as the features' map `Φ_X Cᵀ` of shell 20.
@@ -604,25 +604,16 @@ impl Refiner for SmoothShells {
         let xs = x.shell(&wk);
         let cur = level::Posed::new(x.deform(&xs, &state.tau, fm.k), x.faces);
         let ys = level::Posed::new(y.shell(&wk), y.faces);
-        let all_x: Vec<usize> = (0..x.verts.len()).collect();
-        let all_y: Vec<usize> = (0..y.verts.len()).collect();
+        let all_x = Samples::new(&x, (0..x.verts.len()).collect());
+        let all_y = Samples::new(&y, (0..y.verts.len()).collect());
         let w = LevelWeights {
             features: 0.25,
             normals: 0.04,
             laplacian: 0.0,
             arap: 0.0,
         };
-        let (_, t_ba) = level::correspondences(
-            &x,
-            &y,
-            &cur,
-            &ys,
-            &all_x,
-            &all_y,
-            &w,
-            Some(&fm),
-            &mut report,
-        )?;
+        let (_, t_ba) =
+            level::correspondences(&cur, &ys, &all_x, &all_y, &w, Some(&fm), &mut report)?;
         report.converged = true;
         report.seconds = t0.elapsed().as_secs_f64();
         Ok(Refined {

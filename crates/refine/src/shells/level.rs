@@ -113,17 +113,13 @@ impl<'a> Shell<'a> {
     pub fn shell(&self, w: &[f64]) -> Vec<[f64; 3]> {
         let kk = w.len().min(self.phi.ncols());
         let coef = DMatrix::from_fn(kk, 3, |i, d| w[i] * self.xi[(i, d)]);
-        points(&mul(&self.phi.columns(0, kk).into_owned(), false, &coef))
+        points(&mul_ref(view(self.phi, kk), false, view(&coef, 3)))
     }
 
     /// `base + Φ[:, :k] τ[:k]`.
     pub fn deform(&self, base: &[[f64; 3]], tau: &DMatrix<f64>, k: usize) -> Vec<[f64; 3]> {
         let k = k.min(tau.nrows()).min(self.phi.ncols());
-        let d = mul(
-            &self.phi.columns(0, k).into_owned(),
-            false,
-            &tau.rows(0, k).into_owned(),
-        );
+        let d = mul_ref(view(self.phi, k), false, view(tau, 3).subrows(0, k));
         base.iter()
             .enumerate()
             .map(|(r, b)| [b[0] + d[(r, 0)], b[1] + d[(r, 1)], b[2] + d[(r, 2)]])
@@ -133,20 +129,30 @@ impl<'a> Shell<'a> {
 
 /// `a b` (or `aᵀ b` with `transpose_a`) by faer's GEMM.
 pub(crate) fn mul(a: &DMatrix<f64>, transpose_a: bool, b: &DMatrix<f64>) -> DMatrix<f64> {
+    mul_ref(view(a, a.ncols()), transpose_a, view(b, b.ncols()))
+}
+
+/// The first `k` columns of `m` as a faer view (no copy: a column-major
+/// matrix's leading columns are a prefix of its storage).
+pub(crate) fn view(m: &DMatrix<f64>, k: usize) -> faer::MatRef<'_, f64> {
+    faer::MatRef::from_column_major_slice(&m.as_slice()[..m.nrows() * k], m.nrows(), k)
+}
+
+/// [`mul`] on faer views.
+fn mul_ref(a: faer::MatRef<'_, f64>, transpose_a: bool, b: faer::MatRef<'_, f64>) -> DMatrix<f64> {
     use faer::linalg::matmul::matmul;
-    let ar = faer::MatRef::from_column_major_slice(a.as_slice(), a.nrows(), a.ncols());
-    let ar = if transpose_a { ar.transpose() } else { ar };
-    let mut out = DMatrix::zeros(ar.nrows(), b.ncols());
-    let par = if ar.nrows() * ar.ncols() * b.ncols() >= 1 << 20 {
+    let a = if transpose_a { a.transpose() } else { a };
+    let mut out = DMatrix::zeros(a.nrows(), b.ncols());
+    let par = if a.nrows() * a.ncols() * b.ncols() >= 1 << 20 {
         faer::Par::rayon(0)
     } else {
         faer::Par::Seq
     };
     matmul(
-        faer::MatMut::from_column_major_slice_mut(out.as_mut_slice(), ar.nrows(), b.ncols()),
+        faer::MatMut::from_column_major_slice_mut(out.as_mut_slice(), a.nrows(), b.ncols()),
         faer::Accum::Replace,
-        ar,
-        faer::MatRef::from_column_major_slice(b.as_slice(), b.nrows(), b.ncols()),
+        a,
+        b,
         1.0,
         par,
     );
@@ -214,6 +220,34 @@ impl Posed {
     }
 }
 
+/// Sample vertices of a shape (`Deref` to their indices) with their rows
+/// of Φ, gathered once: every level reads them for its correspondences and
+/// fits, and rows of the whole Φ would be a cache miss each.
+pub(crate) struct Samples {
+    pub idx: Vec<usize>,
+    /// `Φ[idx, :]` (samples x K).
+    pub phi: DMatrix<f64>,
+    /// `√M` at the samples.
+    pub sqrt_mass: Vec<f64>,
+}
+
+impl Samples {
+    pub fn new(s: &Shell<'_>, idx: Vec<usize>) -> Samples {
+        Samples {
+            phi: DMatrix::from_fn(idx.len(), s.phi.ncols(), |r, c| s.phi[(idx[r], c)]),
+            sqrt_mass: idx.iter().map(|&i| s.mass[i].sqrt()).collect(),
+            idx,
+        }
+    }
+}
+
+impl std::ops::Deref for Samples {
+    type Target = [usize];
+    fn deref(&self) -> &[usize] {
+        &self.idx
+    }
+}
+
 /// The normals' weight in the product space: `normals` times the ratio
 /// of the coordinates' to the normals' norms on the samples, averaged
 /// over both shapes.
@@ -276,26 +310,20 @@ fn frob(p: &[[f64; 3]], idx: &[usize]) -> f64 {
         .sqrt()
 }
 
-/// The spectral features of the samples `idx` of one shape: rows of
+/// The spectral features of the samples of one shape: rows of
 /// `Φ[:, :k'] C[:, :k] diag(w)` (X, with `c`) or `Φ[:, :k] diag(w)` (Y).
-fn features(
-    s: &Shell<'_>,
-    idx: &[usize],
-    fm: &FeatureMap,
-    c: Option<&DMatrix<f64>>,
-) -> DMatrix<f64> {
+fn features(s: &Samples, fm: &FeatureMap, c: Option<&DMatrix<f64>>) -> DMatrix<f64> {
     let k = fm.k;
     match c {
         Some(c) => {
             let kk = c.nrows();
-            let rows = DMatrix::from_fn(idx.len(), kk, |r, i| s.phi[(idx[r], i)]);
-            let mut f = rows * c.columns(0, k);
+            let mut f = mul_ref(view(&s.phi, kk), false, view(c, k));
             for j in 0..k {
                 f.column_mut(j).scale_mut(fm.weights[j]);
             }
             f
         }
-        None => DMatrix::from_fn(idx.len(), k, |r, j| s.phi[(idx[r], j)] * fm.weights[j]),
+        None => DMatrix::from_fn(s.len(), k, |r, j| s.phi[(r, j)] * fm.weights[j]),
     }
 }
 
@@ -317,22 +345,20 @@ fn brute() -> NnParams {
 }
 
 /// Correspondences of the samples in the product embedding: for each X
-/// sample a Y sample and for each Y sample an X sample (vertex indices).
-#[allow(clippy::too_many_arguments)]
+/// sample a Y sample and for each Y sample an X sample (positions in the
+/// other shape's samples).
 pub(crate) fn correspondences(
-    x: &Shell<'_>,
-    y: &Shell<'_>,
     px: &Posed,
     py: &Posed,
-    sx: &[usize],
-    sy: &[usize],
+    sx: &Samples,
+    sy: &Samples,
     w: &LevelWeights,
     fmap: Option<&FeatureMap>,
     report: &mut RefineReport,
 ) -> Result<(Vec<usize>, Vec<usize>)> {
     let (vx, vy) = (frob(&px.pts, sx), frob(&py.pts, sy));
     let fnm = normal_scale(px, py, sx, sy, w.normals);
-    let feats = fmap.map(|fm| (features(x, sx, fm, Some(&fm.c)), features(y, sy, fm, None)));
+    let feats = fmap.map(|fm| (features(sx, fm, Some(&fm.c)), features(sy, fm, None)));
     let (fx, fy) = match &feats {
         Some((fx, fy)) => {
             let (nfx, nfy) = (fx.norm(), fy.norm());
@@ -352,9 +378,7 @@ pub(crate) fn correspondences(
     let (ab, ba) = rayon::join(|| search(&ey, &ex), || search(&ex, &ey));
     report.nn_searches += 2;
     report.nn_seconds += t.elapsed().as_secs_f64();
-    let ab: Vec<usize> = ab?.into_iter().map(|j| sy[j]).collect();
-    let ba: Vec<usize> = ba?.into_iter().map(|j| sx[j]).collect();
-    Ok((ab, ba))
+    Ok((ab?, ba?))
 }
 
 /// Per-vertex ARAP rotations from `rest` to `cur` (one-ring Procrustes).
@@ -407,8 +431,8 @@ pub(crate) fn level(
     x: &Shell<'_>,
     y: &Shell<'_>,
     shells: &Shells,
-    sx: &[usize],
-    sy: &[usize],
+    sx: &Samples,
+    sy: &Samples,
     k: usize,
     w: &LevelWeights,
     arap_gram: Option<&DMatrix<f64>>,
@@ -419,19 +443,18 @@ pub(crate) fn level(
     let kk = wk.len().min(x.phi.ncols()).min(y.phi.ncols());
     let kd = k.min(kk);
     let cur = Posed::new(x.deform(xs, &state.tau, kd), x.faces);
-    let (ab, ba) = correspondences(x, y, &cur, ys, sx, sy, w, state.fmap.as_ref(), report)?;
+    let (ab, ba) = correspondences(&cur, ys, sx, sy, w, state.fmap.as_ref(), report)?;
 
-    // Deformation: Σ ‖XS(s) + Φ(s)τ − YS(π s)‖² over both directions.
-    let pairs: Vec<(usize, usize)> = sx
-        .iter()
-        .copied()
+    // Deformation: Σ ‖XS(s) + Φ(s)τ − YS(π s)‖² over both directions
+    // (pairs of sample positions).
+    let pairs: Vec<(usize, usize)> = (0..sx.len())
         .zip(ab.iter().copied())
-        .chain(ba.iter().copied().zip(sy.iter().copied()))
+        .chain(ba.iter().copied().zip(0..sy.len()))
         .collect();
-    let a = DMatrix::from_fn(pairs.len(), kd, |r, i| x.phi[(pairs[r].0, i)]);
+    let a = DMatrix::from_fn(pairs.len(), kd, |r, i| sx.phi[(pairs[r].0, i)]);
     let res = DMatrix::from_fn(pairs.len(), 3, |r, d| {
         let (xi, yi) = pairs[r];
-        ys.pts[yi][d] - xs[xi][d]
+        ys.pts[sy[yi]][d] - xs[sx[xi]][d]
     });
     let mut m = mul(&a, true, &a);
     let mut z = mul(&a, true, &res);
@@ -448,7 +471,7 @@ pub(crate) fn level(
             }
         }
         let bm = DMatrix::from_fn(b.len(), 3, |r, d| b[r][d]);
-        let za = mul(&x.phi.columns(0, kd).into_owned(), true, &bm);
+        let za = mul_ref(view(x.phi, kd), true, view(&bm, 3));
         let s = w.arap * inf_norm(&m) / inf_norm(&ga.into_owned()).max(f64::MIN_POSITIVE);
         m += ga * s;
         z += za * s;
@@ -462,11 +485,11 @@ pub(crate) fn level(
     // Functional map on the correspondences (area weighted).
     let ax = DMatrix::from_fn(pairs.len(), kk, |r, c| {
         let i = pairs[r].0;
-        x.mass[i].sqrt() * x.phi[(i, c)]
+        sx.sqrt_mass[i] * sx.phi[(i, c)]
     });
     let ay = DMatrix::from_fn(pairs.len(), kk, |r, c| {
         let (i, j) = pairs[r];
-        x.mass[i].sqrt() * y.phi[(j, c)]
+        sx.sqrt_mass[i] * sy.phi[(j, c)]
     });
     let mm = mul(&ax, true, &ax);
     let zz = mul(&ax, true, &ay);
@@ -526,7 +549,7 @@ pub(crate) fn arap_gram(x: &Shell<'_>, k: usize) -> DMatrix<f64> {
             .map(|&j| x.phi[(i, c)] - x.phi[(j, c)])
             .sum::<f64>()
     });
-    mul(&x.phi.columns(0, k).into_owned(), true, &lphi) * 2.0
+    mul_ref(view(x.phi, k), true, view(&lphi, k)) * 2.0
 }
 
 /// The alignment energy of a result (the initialisation's score): the
@@ -536,8 +559,8 @@ pub(crate) fn arap_gram(x: &Shell<'_>, k: usize) -> DMatrix<f64> {
 pub(crate) fn alignment_energy(
     x: &Shell<'_>,
     y: &Shell<'_>,
-    sx: &[usize],
-    sy: &[usize],
+    sx: &Samples,
+    sy: &Samples,
     state: &Alignment,
     w: &LevelWeights,
     report: &mut RefineReport,
@@ -545,7 +568,7 @@ pub(crate) fn alignment_energy(
     let k = state.fmap.as_ref().map_or(state.tau.nrows(), |f| f.k);
     let cur = Posed::new(x.deform(&x.verts, &state.tau, k), x.faces);
     let full_y = Posed::new(y.verts.clone(), y.faces);
-    let (ab, ba) = correspondences(x, y, &cur, &full_y, sx, sy, w, state.fmap.as_ref(), report)?;
+    let (ab, ba) = correspondences(&cur, &full_y, sx, sy, w, state.fmap.as_ref(), report)?;
     let fn_ = normal_scale(&cur, &full_y, sx, sy, w.normals);
     let (cur, nx, yv, ny) = (&cur.pts, &cur.nrm, &full_y.pts, &full_y.nrm);
     let dist = |i: usize, j: usize| {
@@ -557,10 +580,10 @@ pub(crate) fn alignment_energy(
     };
     let mut e = 0.0;
     for (&i, &j) in sx.iter().zip(&ab) {
-        e += x.mass[i] * dist(i, j);
+        e += x.mass[i] * dist(i, sy[j]);
     }
-    for (&i, &j) in ba.iter().zip(sy) {
-        e += y.mass[j] * dist(i, j);
+    for (&i, &j) in ba.iter().zip(sy.iter()) {
+        e += y.mass[j] * dist(sx[i], j);
     }
     Ok(e / (sx.len() + sy.len()) as f64)
 }
