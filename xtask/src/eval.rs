@@ -333,7 +333,7 @@ fn refiner_method(refiner: &str) -> anyhow::Result<fmaps::pipeline::Refinement> 
 
 /// `smooth-shells[:KEY=VALUE,..]`: Smooth Shells with the defaults but the
 /// keys given (k_max, levels, samples, init_samples, proposals, finalists,
-/// signs, seed, rigid, input: 0 or 1 for the last two).
+/// signs, seed, rigid, orientations, input: 0 or 1 for rigid and input).
 fn smooth_shells(spec: &str) -> anyhow::Result<fmaps::refine::SmoothShells> {
     let mut s = fmaps::refine::SmoothShells::default();
     let Some(list) = spec.strip_prefix("smooth-shells:") else {
@@ -357,9 +357,10 @@ fn smooth_shells(spec: &str) -> anyhow::Result<fmaps::refine::SmoothShells> {
             "signs" => s.sign_hypotheses = u,
             "seed" => s.seed = n,
             "rigid" => s.rigid = n != 0,
+            "orientations" => s.orientations = u,
             "input" => s.use_input_map = n != 0,
             _ => bail!(
-                "{spec}: unknown key '{k}' (k_max, levels, samples, init_samples, proposals, finalists, signs, seed, rigid, input)"
+                "{spec}: unknown key '{k}' (k_max, levels, samples, init_samples, proposals, finalists, signs, seed, rigid, orientations, input)"
             ),
         }
     }

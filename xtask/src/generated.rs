@@ -5,7 +5,7 @@
 //! (`fmaps eval`, `cargo xtask eval`, the Python peers) reads them as it
 //! reads FAUST.
 //!
-//! Six individuals (pseudo-random [`Build`]s: limbs and tail 0.6-1.6 times
+//! Six individuals (pseudo-random [`Build`](fmaps::mesh_io::body::Build)s: limbs and tail 0.6-1.6 times
 //! the template, girths and head 0.7-1.4, ...), each in four poses (rest,
 //! walking, crouching, reaching, each jittered per individual); every shape
 //! remeshed independently (grid spacing 0.039-0.047, random grid offset:
@@ -23,7 +23,7 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::Context;
-use fmaps::mesh_io::body::{Body, BodyPose, Build, mirrored, nearest_vertices};
+use fmaps::mesh_io::body::{Body, mirrored, nearest_vertices};
 
 use crate::util::root;
 
@@ -79,25 +79,14 @@ fn write_collection(dir: &Path) -> anyhow::Result<()> {
     let corres = shapes_dir.join("corres");
     std::fs::create_dir_all(&corres)?;
     let body = Body::template();
-    let template = body.rest_mesh(0.043, [0.5, 0.5, 0.5])?;
-    let points = template.vertices().to_vec();
+    let points = body.truth_points()?;
     let mirror: Vec<[f64; 3]> = points.iter().map(|&p| mirrored(p)).collect();
-    let presets = [
-        BodyPose::rest(),
-        BodyPose::walking(),
-        BodyPose::crouching(),
-        BodyPose::reaching(),
-    ];
     let jobs: Vec<(usize, usize)> = (0..INDIVIDUALS)
         .flat_map(|i| (0..POSES).map(move |p| (i, p)))
         .collect();
     jobs.par_iter()
         .try_for_each(|&(i, p)| -> anyhow::Result<()> {
-            let seed = (i * POSES + p) as u64;
-            let build = Build::random(1000 + i as u64);
-            let pose = presets[p].jittered(seed, 0.12);
-            let spacing = 0.039 + 0.008 * ((seed * 7919) % 97) as f64 / 96.0;
-            let shape = body.shape(&build, &pose, spacing, seed)?;
+            let shape = body.collection_shape(i, p)?;
             let name = shape_name(i, p);
             fmaps::mesh_io::write_mesh(shapes_dir.join(format!("{name}.off")), &shape.mesh)?;
             fmaps::mesh_io::write_vts(

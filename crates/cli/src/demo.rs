@@ -1,4 +1,6 @@
-//! `fmaps demo`: the whole method on the built-in creature pair, with
+//! `fmaps demo`: the default pipeline on two built-in pairs, a
+//! near-isometric one (the creature in two poses) and a non-isometric one
+//! (two generated bodies of different builds in different poses), with
 //! exact-geodesic errors and pictures.
 
 use std::path::Path;
@@ -6,59 +8,225 @@ use std::time::Instant;
 
 use fmaps::eval::{EvalParams, GroundTruth, MapReport, evaluate};
 use fmaps::geodesic::ExactSolver;
+use fmaps::mesh_io::TriMesh;
+use fmaps::mesh_io::body::{Body, mirrored, nearest_vertices};
 use fmaps::mesh_io::generate::creature_pair;
-use fmaps::pipeline::{MatchParams, Refinement, match_prepared, prepare};
+use fmaps::pipeline::{MatchParams, MatchResult, Refinement, match_prepared, prepare};
 use fmaps::viz::{self, View, plot};
-use serde_json::json;
+use serde_json::{Value, json};
 
+use crate::outputs::Staged;
 use crate::{Failure, emit, outln, runtime};
+
+/// One built-in pair with its ground truth.
+struct Case {
+    /// What the pair is, for the report.
+    title: String,
+    /// Prefix of its pictures' file names.
+    prefix: &'static str,
+    a: TriMesh,
+    b: TriMesh,
+    truth: GroundTruth,
+    /// The A vertex of each ground-truth row (for per-vertex pictures).
+    rows: Vec<usize>,
+}
+
+/// What the default pipeline did on a case.
+struct Outcome {
+    r: MatchResult,
+    init: MapReport,
+    refined: MapReport,
+    spectra: f64,
+    eval_seconds: f64,
+}
 
 pub(crate) fn run(out_dir: &Path, subdivisions: u32, as_json: bool) -> Result<(), Failure> {
     if !(3..=6).contains(&subdivisions) {
         return Err(crate::input(anyhow::anyhow!(
-            "--subdivisions {subdivisions}: use 3..=6 (3 = 642 vertices, 4 = 2,562, 5 = 10,242; ZoomOut to 150 eigenpairs needs more than 162)"
+            "--subdivisions {subdivisions}: use 3..=6 (3 = 642 vertices, 4 = 2,562, 5 = 10,242; the default refinement needs more than 200)"
         )));
     }
     let t0 = Instant::now();
-    let spinner = crate::Spinner::new("generating the built-in pair");
-    let pair = creature_pair(subdivisions);
-    let (a, b) = (&pair.source, &pair.target);
-    let n = a.n_vertices();
+    let spinner = crate::Spinner::new("generating the built-in pairs");
+    let cases = [creature_case(subdivisions)?, body_case()?];
     let params = MatchParams {
-        refine: Refinement::default_zoomout(),
+        refine: Refinement::recommended(),
         ..MatchParams::default()
     };
-    spinner.stage("Laplacians and eigenbases of both shapes");
+    std::fs::create_dir_all(out_dir)
+        .map_err(|e| runtime(anyhow::anyhow!("{}: {e}", out_dir.display())))?;
+    // Every picture is staged and all are renamed into place at the end:
+    // a failure leaves the folder as it was.
+    let mut staged = Staged::default();
+    let mut written = Vec::new();
+    let mut outcomes = Vec::new();
+    for case in &cases {
+        spinner.stage(&format!(
+            "{}: eigenbases, functional map, refinement",
+            case.title
+        ));
+        let o = run_case(case, &params)?;
+        spinner.stage(&format!("{}: pictures", case.title));
+        pictures(case, &o, out_dir, &mut staged, &mut written)?;
+        outcomes.push(o);
+    }
+    staged.commit()?;
+    let total = t0.elapsed().as_secs_f64();
+    drop(spinner);
+
+    let refine_name = outcomes[0].r.refine.as_ref().map(|x| x.method.clone());
+    if as_json {
+        let case_json = |c: &Case, o: &Outcome| -> Value {
+            let st = &o.r.times;
+            json!({
+                "pair": c.title, "n_source": c.a.n_vertices(), "n_target": c.b.n_vertices(),
+                "seconds": {"spectra": o.spectra, "descriptors": st.descriptors,
+                    "operators": st.operators, "solve": st.solve, "point_map": st.point_map,
+                    "refine": st.refine, "evaluation": o.eval_seconds},
+                "mean_error_init": o.init.mean_error, "mean_error": o.refined.mean_error,
+                "sym_mean_error": o.refined.sym_mean_error,
+                "auc_init": o.init.auc, "auc": o.refined.auc, "orientation": o.r.orientation,
+            })
+        };
+        let (iso, noniso) = (&outcomes[0], &outcomes[1]);
+        let v = json!({
+            "n_vertices": cases[0].a.n_vertices(), "k": params.k, "refine": refine_name,
+            "seconds": {"spectra": iso.spectra, "refine": iso.r.times.refine, "total": total},
+            "mean_error_init": iso.init.mean_error, "mean_error": iso.refined.mean_error,
+            "auc_init": iso.init.auc, "auc": iso.refined.auc, "orientation": iso.r.orientation,
+            "geodesic": iso.refined.geodesic, "pictures": written,
+            "pairs": [case_json(&cases[0], iso), case_json(&cases[1], noniso)],
+        });
+        return emit(&format!("{v}\n"));
+    }
+    let mut o = String::new();
+    outln!(
+        o,
+        "fmaps demo: the default pipeline ({}) on two built-in pairs",
+        refine_name.as_deref().unwrap_or("no refinement")
+    );
+    for (c, r) in cases.iter().zip(&outcomes) {
+        let st = &r.r.times;
+        outln!(
+            o,
+            "{} ({} -> {} vertices)",
+            c.title,
+            c.a.n_vertices(),
+            c.b.n_vertices()
+        );
+        let front = st.descriptors + st.operators + st.solve + st.point_map;
+        for (name, sec) in [
+            ("eigenbases (both)", r.spectra),
+            ("initial map", front),
+            ("refinement", st.refine),
+            ("exact evaluation", r.eval_seconds),
+        ] {
+            outln!(o, "  {name:<18} {sec:>7.3} s");
+        }
+        let sym = r.refined.sym_mean_error.map_or(String::new(), |s| {
+            format!(" (symmetry-aware {:.2})", 100.0 * s)
+        });
+        outln!(
+            o,
+            "  mean geodesic error x100 (exact, / sqrt(area)): initial map {:.2}, refined {:.2}{sym}",
+            100.0 * r.init.mean_error,
+            100.0 * r.refined.mean_error
+        );
+        outln!(
+            o,
+            "  AUC on [0, 0.25]: {:.3} -> {:.3}; orientation score {:.3}",
+            r.init.auc,
+            r.refined.auc,
+            r.r.orientation
+        );
+    }
+    outln!(o, "total {total:.2} s; pictures in {}:", out_dir.display());
+    for p in &written {
+        outln!(o, "  {p}");
+    }
+    emit(&o)
+}
+
+/// The creature at rest and walking (the target renumbered and moved);
+/// vertex i of A is vertex `truth[i]` of B.
+fn creature_case(subdivisions: u32) -> Result<Case, Failure> {
+    let pair = creature_pair(subdivisions);
+    let n = pair.source.n_vertices();
+    Ok(Case {
+        title: "creature, rest -> walking (near-isometric)".into(),
+        prefix: "",
+        truth: GroundTruth::new((0..n).collect(), pair.truth.clone(), None).map_err(runtime)?,
+        rows: (0..n).collect(),
+        a: pair.source,
+        b: pair.target,
+    })
+}
+
+/// Two individuals of the generated body collection, walking and
+/// reaching (`body_0_1 -> body_1_3` of `cargo xtask eval --collection
+/// generated-noniso`): limbs, girths and torso of different proportions,
+/// independent meshes, ground truth through the template.
+fn body_case() -> Result<Case, Failure> {
+    let body = Body::template();
+    let (sa, sb) = (
+        body.collection_shape(0, 1).map_err(runtime)?,
+        body.collection_shape(1, 3).map_err(runtime)?,
+    );
+    let points = body.truth_points().map_err(runtime)?;
+    let mirror: Vec<[f64; 3]> = points.iter().map(|&p| mirrored(p)).collect();
+    let rows = nearest_vertices(&points, &sa.rest);
+    let truth = GroundTruth::new(
+        rows.clone(),
+        nearest_vertices(&points, &sb.rest),
+        Some(nearest_vertices(&mirror, &sb.rest)),
+    )
+    .map_err(runtime)?;
+    Ok(Case {
+        title: "two different bodies, walking -> reaching (non-isometric)".into(),
+        prefix: "noniso-",
+        a: sa.mesh,
+        b: sb.mesh,
+        truth,
+        rows,
+    })
+}
+
+fn run_case(case: &Case, params: &MatchParams) -> Result<Outcome, Failure> {
     let t = Instant::now();
     let mut single = params.clone();
     single.spectrum.threads = 1;
-    let (pa, pb) = rayon::join(|| prepare(a, &single), || prepare(b, &single));
+    let (pa, pb) = rayon::join(|| prepare(&case.a, &single), || prepare(&case.b, &single));
     let (pa, pb) = (pa.map_err(runtime)?, pb.map_err(runtime)?);
     let spectra = t.elapsed().as_secs_f64();
-    spinner.stage("descriptors, functional map, ZoomOut");
-    let r = match_prepared(&pa, &pb, &params).map_err(runtime)?;
-    spinner.stage("exact geodesic errors");
-
+    let r = match_prepared(&pa, &pb, params).map_err(runtime)?;
     let t = Instant::now();
-    let gt = GroundTruth::new((0..n).collect(), pair.truth.clone(), None).map_err(runtime)?;
-    let solver = ExactSolver::new(b).map_err(runtime)?;
+    let solver = ExactSolver::new(&case.b).map_err(runtime)?;
     let ep = EvalParams::default();
     let eval = |t_ab: &[usize]| -> Result<MapReport, Failure> {
-        evaluate(b, &solver, t_ab, &gt, None, &ep).map_err(runtime)
+        evaluate(&case.b, &solver, t_ab, &case.truth, None, &ep).map_err(runtime)
     };
     let (init, refined) = (eval(&r.t_ab_init)?, eval(&r.t_ab)?);
-    let eval_seconds = t.elapsed().as_secs_f64();
+    Ok(Outcome {
+        r,
+        init,
+        refined,
+        spectra,
+        eval_seconds: t.elapsed().as_secs_f64(),
+    })
+}
 
-    spinner.stage("pictures");
-    std::fs::create_dir_all(out_dir)
-        .map_err(|e| runtime(anyhow::anyhow!("{}: {e}", out_dir.display())))?;
+/// The pictures of a case (names with the case's prefix), staged.
+fn pictures(
+    case: &Case,
+    o: &Outcome,
+    out_dir: &Path,
+    staged: &mut Staged,
+    written: &mut Vec<String>,
+) -> Result<(), Failure> {
+    let (a, b, r) = (&case.a, &case.b, &o.r);
     let view = View::default();
-    // Every picture is staged and all are renamed into place at the end:
-    // a failure leaves the folder as it was.
-    let mut staged = crate::outputs::Staged::default();
-    let mut written = Vec::new();
     let mut save = |img: viz::Image, name: &str| -> Result<(), Failure> {
-        let p = out_dir.join(name);
+        let p = out_dir.join(format!("{}{name}", case.prefix));
         staged.stage(&p, |tmp| Ok(img.save_png(tmp)?))?;
         written.push(p.display().to_string());
         Ok(())
@@ -73,46 +241,44 @@ pub(crate) fn run(out_dir: &Path, subdivisions: u32, as_json: bool) -> Result<()
     save(img, "texture-transfer.png")?;
     let vmax = 0.1;
     for (rep, name, title) in [
-        (&refined, "error-zoomout.png", "error, ZoomOut"),
-        (&init, "error-init.png", "error, initial"),
+        (&o.refined, "error.png", "error, default pipeline"),
+        (&o.init, "error-init.png", "error, initial map"),
     ] {
+        let per_vertex = fmaps::pictures::vertex_values(a, &case.rows, &rep.errors);
         let img =
-            fmaps::pictures::error_map(a, &rep.errors, vmax, title, &view).map_err(runtime)?;
+            fmaps::pictures::error_map(a, &per_vertex, vmax, title, &view).map_err(runtime)?;
         save(img, name)?;
     }
     save(
         plot::heatmap(
-            &format!("C_BA after ZoomOut ({0} x {0})", r.c_ba.nrows()),
+            &format!("C_BA, refined ({0} x {0})", r.c_ba.nrows()),
             &r.c_ba,
             1.0,
         ),
         "fmap.png",
     )?;
-    let img =
-        fmaps::pictures::spectral_embedding(a, &pa.basis, [1, 2, 3], &view).map_err(runtime)?;
-    save(img, "spectral-embedding.png")?;
     let series = vec![
         plot::Series {
-            label: format!("initial map ({:.2})", 100.0 * init.mean_error),
-            x: init.thresholds.clone(),
-            y: init.curve.clone(),
+            label: format!("initial map ({:.2})", 100.0 * o.init.mean_error),
+            x: o.init.thresholds.clone(),
+            y: o.init.curve.clone(),
         },
         plot::Series {
-            label: format!("after ZoomOut ({:.2})", 100.0 * refined.mean_error),
-            x: refined.thresholds.clone(),
-            y: refined.curve.clone(),
+            label: format!("default pipeline ({:.2})", 100.0 * o.refined.mean_error),
+            x: o.refined.thresholds.clone(),
+            y: o.refined.curve.clone(),
         },
     ];
     save(
         plot::cumulative_curves(
-            "built-in creature pair: cumulative geodesic error",
-            ep.max_threshold,
+            &format!("{}: cumulative geodesic error", case.title),
+            EvalParams::default().max_threshold,
             &series,
         ),
         "curves.png",
     )?;
     for (mesh, colors, name) in [(a, &cs, "source.ply"), (b, &ct, "target.ply")] {
-        let p = out_dir.join(name);
+        let p = out_dir.join(format!("{}{name}", case.prefix));
         staged.stage(&p, |tmp| {
             Ok(viz::write_colored_ply(
                 tmp,
@@ -123,56 +289,5 @@ pub(crate) fn run(out_dir: &Path, subdivisions: u32, as_json: bool) -> Result<()
         })?;
         written.push(p.display().to_string());
     }
-    staged.commit()?;
-    let total = t0.elapsed().as_secs_f64();
-    drop(spinner);
-
-    let st = &r.times;
-    if as_json {
-        let v = json!({
-            "n_vertices": n, "k": params.k, "refine": r.refine.as_ref().map(|x| x.method.clone()),
-            "seconds": {"spectra": spectra, "descriptors": st.descriptors, "operators": st.operators,
-                "solve": st.solve, "point_map": st.point_map, "refine": st.refine,
-                "evaluation": eval_seconds, "total": total},
-            "mean_error_init": init.mean_error, "mean_error": refined.mean_error,
-            "auc_init": init.auc, "auc": refined.auc, "orientation": r.orientation,
-            "geodesic": refined.geodesic, "pictures": written,
-        });
-        return emit(&format!("{v}\n"));
-    }
-    let mut o = String::new();
-    outln!(
-        o,
-        "fmaps demo: the built-in creature at rest -> walking ({n} vertices each; target renumbered and moved)"
-    );
-    for (name, sec) in [
-        ("eigenbases (both)", spectra),
-        ("descriptors", st.descriptors),
-        ("operators", st.operators),
-        ("solve", st.solve),
-        ("point map", st.point_map),
-        ("ZoomOut 50->150", st.refine),
-        ("exact evaluation", eval_seconds),
-        ("total", total),
-    ] {
-        outln!(o, "  {name:<18} {sec:>7.3} s");
-    }
-    outln!(
-        o,
-        "mean geodesic error x100 (exact, / sqrt(area)): initial map {:.2}, after ZoomOut {:.2}",
-        100.0 * init.mean_error,
-        100.0 * refined.mean_error
-    );
-    outln!(
-        o,
-        "AUC on [0, 0.25]: {:.3} -> {:.3}; orientation score {:.3}",
-        init.auc,
-        refined.auc,
-        r.orientation
-    );
-    outln!(o, "pictures in {}:", out_dir.display());
-    for p in &written {
-        outln!(o, "  {p}");
-    }
-    emit(&o)
+    Ok(())
 }

@@ -45,19 +45,21 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
-    /// The whole method on a built-in pair with known correspondence (an
-    /// asymmetric creature and a bent, renumbered copy): eigenbases, WKS,
-    /// functional map, ZoomOut, exact-geodesic errors, and pictures.
+    /// The default pipeline on two built-in pairs with known
+    /// correspondence: an asymmetric creature and a bent, renumbered copy
+    /// (near-isometric), and two generated bodies of different builds in
+    /// different poses (non-isometric); exact-geodesic errors and pictures.
     #[command(
         after_help = "Examples:\n  fmaps demo\n  fmaps demo --out pictures --subdivisions 5 --json\n\n\
-Writes color-transfer.png (and -init), texture-transfer.png, error-zoomout.png / error-init.png,\n\
-fmap.png, spectral-embedding.png, curves.png and source.ply / target.ply (coloured, for MeshLab)."
+Writes, per pair (the non-isometric one prefixed noniso-), color-transfer.png (and -init),\n\
+texture-transfer.png, error.png / error-init.png, fmap.png, curves.png and source.ply /\n\
+target.ply (coloured, for MeshLab)."
     )]
     Demo {
         /// Folder for the pictures (created).
         #[arg(long, default_value = "fmaps-demo")]
         out: PathBuf,
-        /// Mesh resolution: the icosphere's subdivisions (4 = 2,562
+        /// Resolution of the creature pair: the icosphere's subdivisions (4 = 2,562
         /// vertices, 5 = 10,242).
         #[arg(long, default_value_t = 4)]
         subdivisions: u32,

@@ -40,7 +40,10 @@ pub(crate) struct MatchArgs {
     /// Relative weight of the orientation-preserving term (0 = off).
     #[arg(long, default_value_t = defaults().w_orient)]
     w_orient: f64,
-    /// Refinement of the initial map (`--zoomout` alone implies zoomout).
+    /// Refinement of the initial map. Default: smooth-shells (the most
+    /// accurate here, near-isometric and non-isometric; README's table),
+    /// or zoomout when only --zoomout is given; `none` keeps the initial
+    /// map.
     #[arg(long, value_enum)]
     refine: Option<RefineKind>,
     /// ZoomOut schedule START:FINAL:STEP (the basis grows from START to
@@ -82,6 +85,12 @@ pub(crate) struct MatchArgs {
     /// run).
     #[arg(long, value_name = "SCORE")]
     restart_below: Option<f64>,
+    /// B is a mirror image of A: look for an orientation-reversing map
+    /// (the descriptor solve's orientation term reversed; Smooth Shells
+    /// aligns A's reflection). Without it, maps preserve orientation and
+    /// the orientation score reported tells whether a pair needs it.
+    #[arg(long)]
+    mirrored: bool,
     /// Keep the meshes' own units: no scaling to unit area before the
     /// eigenbases (by default each shape is scaled to unit area, so that
     /// the map does not depend on the units of either mesh).
@@ -188,12 +197,18 @@ pub(crate) fn read_landmarks(path: &Path) -> Result<mesh_io::Landmarks, Failure>
     mesh_io::read_landmarks(path).map_err(input)
 }
 
-/// The refinement asked for on the command line.
-pub(crate) fn refinement(args: &MatchArgs) -> Result<fmaps::pipeline::Refinement, Failure> {
+/// The refinement asked for on the command line; without refinement
+/// flags the recommended one, if both meshes (the smaller has `smallest`
+/// vertices) are large enough for its basis, else none.
+pub(crate) fn refinement(
+    args: &MatchArgs,
+    smallest: usize,
+) -> Result<fmaps::pipeline::Refinement, Failure> {
     use fmaps::pipeline::Refinement;
     let kind = match (args.refine, &args.zoomout) {
         (Some(k), _) => k,
         (None, Some(_)) => RefineKind::Zoomout,
+        (None, None) if default_fits(smallest) => RefineKind::SmoothShells,
         (None, None) => RefineKind::None,
     };
     let bad = |m: String| Err(input(anyhow::anyhow!(m)));
@@ -206,7 +221,10 @@ pub(crate) fn refinement(args: &MatchArgs) -> Result<fmaps::pipeline::Refinement
             Refinement::Custom(std::sync::Arc::new(fmaps::refine::Repair::default()))
         }
         RefineKind::SmoothShells => {
-            Refinement::Custom(std::sync::Arc::new(fmaps::refine::SmoothShells::default()))
+            Refinement::Custom(std::sync::Arc::new(fmaps::refine::SmoothShells {
+                reflect: args.mirrored,
+                ..Default::default()
+            }))
         }
         RefineKind::Icp => Refinement::Icp(Icp {
             max_iterations: args.icp_iterations,
@@ -242,9 +260,16 @@ pub(crate) fn refinement(args: &MatchArgs) -> Result<fmaps::pipeline::Refinement
     })
 }
 
+/// Whether meshes whose smaller one has `smallest` vertices can run the
+/// recommended refinement (its eigenpairs need more vertices).
+fn default_fits(smallest: usize) -> bool {
+    smallest > fmaps::pipeline::Refinement::recommended().k_needed()
+}
+
 /// The pipeline's parameters for the command line `args` (the library's
-/// defaults where a flag is not given).
-pub(crate) fn params_of(args: &MatchArgs) -> Result<MatchParams, Failure> {
+/// defaults where a flag is not given) and meshes whose smaller one has
+/// `smallest` vertices.
+pub(crate) fn params_of(args: &MatchArgs, smallest: usize) -> Result<MatchParams, Failure> {
     let mut params = MatchParams {
         k: args.k,
         k_process: args.k_process,
@@ -258,8 +283,9 @@ pub(crate) fn params_of(args: &MatchArgs) -> Result<MatchParams, Failure> {
         params.landmarks = read_landmarks(p)?.pairs;
     }
     params.adjoint = args.adjoint;
+    params.orient_reversing = args.mirrored;
     params.area_normalize = !args.no_area_normalize;
-    params.refine = refinement(args)?;
+    params.refine = refinement(args, smallest)?;
     params.starts = match args.starts.as_deref() {
         Some(text) => fmaps::pipeline::parse_starts(text)
             .map_err(|e| input(anyhow::anyhow!("--starts {e}")))?,
@@ -329,7 +355,7 @@ pub(crate) fn match_cmd(args: &MatchArgs) -> Result<(), Failure> {
     let a = load(&args.source)?;
     let b = load(&args.target)?;
     let load_seconds = t.elapsed().as_secs_f64();
-    let params = params_of(args)?;
+    let params = params_of(args, a.n_vertices().min(b.n_vertices()))?;
     if let Some(p) = &args.landmarks {
         // Out-of-range landmarks, named by file and line as written.
         read_landmarks(p)?
@@ -422,6 +448,16 @@ pub(crate) fn match_cmd(args: &MatchArgs) -> Result<(), Failure> {
         r.metrics.laplacian_commutativity,
         100.0 * r.metrics.sparsity
     );
+    if args.refine.is_none()
+        && args.zoomout.is_none()
+        && !default_fits(a.n_vertices().min(b.n_vertices()))
+    {
+        outln!(
+            o,
+            "refinement: none (the default, Smooth Shells, needs meshes of more than {} vertices; --refine zoomout or icp with a smaller basis)",
+            fmaps::pipeline::Refinement::recommended().k_needed()
+        );
+    }
     if let Some(rep) = &r.refine {
         let changed = r
             .t_ab
@@ -479,7 +515,9 @@ mod tests {
         let mut argv = vec!["fmaps", "match", "a.off", "b.off"];
         argv.extend(extra);
         match Cli::try_parse_from(argv).unwrap().command {
-            Command::Match(args) => params_of(&args).unwrap_or_else(|_| panic!("{extra:?}")),
+            Command::Match(args) => {
+                params_of(&args, usize::MAX).unwrap_or_else(|_| panic!("{extra:?}"))
+            }
             _ => unreachable!("a match command"),
         }
     }
@@ -515,7 +553,14 @@ mod tests {
             (p.adjoint, p.compress, &p.starts),
             (d.adjoint, d.compress, &d.starts)
         );
-        assert!(matches!(p.refine, Refinement::None));
+        assert_eq!(
+            format!("{:?}", p.refine),
+            format!("{:?}", Refinement::recommended())
+        );
+        assert!(matches!(
+            parse(&["--refine", "none"]).refine,
+            Refinement::None
+        ));
         match parse(&["--refine", "zoomout"]) {
             MatchParams {
                 refine:

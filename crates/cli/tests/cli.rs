@@ -268,6 +268,7 @@ fn match_writes_a_one_based_map_and_reports_stages() {
         fmaps()
             .args(["match", &s(&mesh), &s(&mesh), "--out", &s(&map)])
             .args(["--k", "12", "--k-process", "30", "--n-descr", "30"])
+            .args(["--refine", "none"])
             .args(["--save-fmap", &s(&fmap), "--json"]),
     );
     for stage in [
@@ -386,19 +387,31 @@ fn demo_matches_the_builtin_pair_and_writes_pictures() {
     );
     assert_eq!(v["n_vertices"], 642);
     assert_eq!(v["geodesic"], "exact");
-    // ZoomOut improves the initial map of this near-isometric pair, and
-    // the result is accurate (errors are fractions of sqrt(area)).
+    // The default pipeline improves the initial map of this near-isometric
+    // pair, and the result is accurate (errors are fractions of sqrt(area)).
     let (init, fin) = (
         v["mean_error_init"].as_f64().unwrap(),
         v["mean_error"].as_f64().unwrap(),
     );
     assert!(fin < init && fin < 0.02, "{init} -> {fin}");
     assert!(v["orientation"].as_f64().unwrap() > 0.8);
+    // The non-isometric pair (two bodies of different builds): the
+    // descriptor map is near random there (measured 0.40; random maps
+    // score ~0.6); the default repairs it to well under the issue-21
+    // target of 0.12 (measured 0.055).
+    let noniso = &v["pairs"][1];
+    let (init, fin) = (
+        noniso["mean_error_init"].as_f64().unwrap(),
+        noniso["mean_error"].as_f64().unwrap(),
+    );
+    assert!(init > 0.25 && fin < 0.12, "{init} -> {fin}");
     for name in [
         "color-transfer.png",
-        "error-zoomout.png",
+        "error.png",
         "fmap.png",
         "curves.png",
+        "noniso-color-transfer.png",
+        "noniso-error.png",
     ] {
         let bytes = std::fs::read(dir.join(name)).unwrap();
         assert_eq!(&bytes[1..4], b"PNG", "{name}");

@@ -515,6 +515,37 @@ impl Body {
         })
     }
 
+    /// Shape `pose` (0 rest, 1 walking, 2 crouching, 3 reaching) of
+    /// individual `individual` of the generated benchmark collection
+    /// (`cargo xtask generate`, `fmaps demo`): the build
+    /// `Build::random(1000 + individual)`, the pose preset jittered by
+    /// 0.12 and a grid spacing of 0.039-0.047, both from the seed
+    /// `4 individual + pose`, which [`Body::shape`] also gets.
+    pub fn collection_shape(&self, individual: usize, pose: usize) -> Result<GeneratedShape> {
+        let presets = [
+            BodyPose::rest,
+            BodyPose::walking,
+            BodyPose::crouching,
+            BodyPose::reaching,
+        ];
+        let preset = presets.get(pose).ok_or_else(|| {
+            crate::Error::Generate(format!("pose {pose}: the collection has poses 0..=3"))
+        })?;
+        let seed = (individual * presets.len() + pose) as u64;
+        let build = Build::random(1000 + individual as u64);
+        let spacing = 0.039 + 0.008 * ((seed * 7919) % 97) as f64 / 96.0;
+        self.shape(&build, &preset().jittered(seed, 0.12), spacing, seed)
+    }
+
+    /// The points the collection's ground truth is defined on: the
+    /// vertices of one more mesh of the template at rest (5,000-odd); a
+    /// shape's ground truth is [`nearest_vertices`] of them (or of their
+    /// [`mirrored`] images, for the symmetric truth) among its `rest`
+    /// positions.
+    pub fn truth_points(&self) -> Result<Vec<[f64; 3]>> {
+        Ok(self.rest_mesh(0.043, [0.5, 0.5, 0.5])?.vertices().to_vec())
+    }
+
     /// Skinning weights of a rest point: per bone, `exp(-(d_b - d_min) /
     /// skin)` of its distance to the bone's capsules, normalised; weights
     /// below 1e-6 dropped.

@@ -328,6 +328,7 @@ fn features(s: &Samples, fm: &FeatureMap, c: Option<&DMatrix<f64>>) -> DMatrix<f
 }
 
 /// The state carried from level to level.
+#[derive(Clone)]
 pub(crate) struct Alignment {
     /// Deformation coefficients (K x 3) of X's shell.
     pub tau: DMatrix<f64>,
@@ -345,15 +346,15 @@ fn brute() -> NnParams {
 }
 
 /// Correspondences of the samples in the product embedding: for each X
-/// sample a Y sample and for each Y sample an X sample (positions in the
-/// other shape's samples).
+/// sample a Y sample (left empty unless `both`) and for each Y sample an X
+/// sample (positions in the other shape's samples).
 pub(crate) fn correspondences(
     px: &Posed,
     py: &Posed,
-    sx: &Samples,
-    sy: &Samples,
+    (sx, sy): (&Samples, &Samples),
     w: &LevelWeights,
     fmap: Option<&FeatureMap>,
+    both: bool,
     report: &mut RefineReport,
 ) -> Result<(Vec<usize>, Vec<usize>)> {
     let (vx, vy) = (frob(&px.pts, sx), frob(&py.pts, sy));
@@ -375,8 +376,13 @@ pub(crate) fn correspondences(
     let search = |d: &Mat<f64>, q: &Mat<f64>| {
         nearest_rows(d.as_ref(), q.as_ref(), None, &brute()).map_err(fmaps_solve::Error::Search)
     };
-    let (ab, ba) = rayon::join(|| search(&ey, &ex), || search(&ex, &ey));
-    report.nn_searches += 2;
+    let (ab, ba) = if both {
+        report.nn_searches += 2;
+        rayon::join(|| search(&ey, &ex), || search(&ex, &ey))
+    } else {
+        report.nn_searches += 1;
+        (Ok(Vec::new()), search(&ex, &ey))
+    };
     report.nn_seconds += t.elapsed().as_secs_f64();
     Ok((ab?, ba?))
 }
@@ -443,7 +449,7 @@ pub(crate) fn level(
     let kk = wk.len().min(x.phi.ncols()).min(y.phi.ncols());
     let kd = k.min(kk);
     let cur = Posed::new(x.deform(xs, &state.tau, kd), x.faces);
-    let (ab, ba) = correspondences(&cur, ys, sx, sy, w, state.fmap.as_ref(), report)?;
+    let (ab, ba) = correspondences(&cur, ys, (sx, sy), w, state.fmap.as_ref(), true, report)?;
 
     // Deformation: Σ ‖XS(s) + Φ(s)τ − YS(π s)‖² over both directions
     // (pairs of sample positions).
@@ -568,7 +574,15 @@ pub(crate) fn alignment_energy(
     let k = state.fmap.as_ref().map_or(state.tau.nrows(), |f| f.k);
     let cur = Posed::new(x.deform(&x.verts, &state.tau, k), x.faces);
     let full_y = Posed::new(y.verts.clone(), y.faces);
-    let (ab, ba) = correspondences(&cur, &full_y, sx, sy, w, state.fmap.as_ref(), report)?;
+    let (ab, ba) = correspondences(
+        &cur,
+        &full_y,
+        (sx, sy),
+        w,
+        state.fmap.as_ref(),
+        true,
+        report,
+    )?;
     let fn_ = normal_scale(&cur, &full_y, sx, sy, w.normals);
     let (cur, nx, yv, ny) = (&cur.pts, &cur.nrm, &full_y.pts, &full_y.nrm);
     let dist = |i: usize, j: usize| {
