@@ -1,6 +1,7 @@
 //! `cargo xtask pictures`: pictures of one test pair per collection, into
 //! `docs/pictures/<collection>/`: colour and texture transfer (source,
-//! fmaps-init, fmaps-zoomout), error heat maps, C, the spectral embedding
+//! fmaps-init, fmaps-zoomout, and the default pipeline, Smooth Shells),
+//! error heat maps, the default's C, the spectral embedding
 //! and the cumulative curves of the methods `cargo xtask eval` knows for
 //! that pair (fmaps, published maps, pyFM when its maps are present).
 
@@ -111,13 +112,22 @@ pub fn pictures(args: &Args) -> anyhow::Result<()> {
         let (pa, pb) = (prepare(&ma, &params)?, prepare(&mb, &params)?);
         let r = match_prepared(&pa, &pb, &params)?;
         let r_init = match_prepared(&pa, &pb, &MatchParams::default())?;
+        // `fmaps match` without flags (fmaps-smooth-shells in the tables).
+        let r_def = match_prepared(
+            &pa,
+            &pb,
+            &MatchParams {
+                refine: Refinement::recommended(),
+                ..MatchParams::default()
+            },
+        )?;
         let gt = c.ground_truth(&a, &b, ma.n_vertices(), mb.n_vertices())?;
         let gt_source = fmaps::mesh_io::read_vts(c.vts_path(&a, false))?;
         let solver = ExactSolver::new(&mb)?;
         let eval = |t: &[usize]| -> anyhow::Result<MapReport> {
             Ok(evaluate(&mb, &solver, t, &gt, None, &ep)?)
         };
-        let (init, refined) = (eval(&r_init.t_ab)?, eval(&r.t_ab)?);
+        let (init, refined, default) = (eval(&r_init.t_ab)?, eval(&r.t_ab)?, eval(&r_def.t_ab)?);
         let view = view_of(cname);
         let mut written = Vec::new();
         let mut save = |img: &Image, name: &str| -> anyhow::Result<()> {
@@ -126,8 +136,11 @@ pub fn pictures(args: &Args) -> anyhow::Result<()> {
             written.push(name.to_string());
             Ok(())
         };
-        let maps: [(&str, &[usize]); 2] =
-            [("fmaps-init", &r_init.t_ab), ("fmaps-zoomout", &r.t_ab)];
+        let maps: [(&str, &[usize]); 3] = [
+            ("fmaps-init", &r_init.t_ab),
+            ("fmaps-zoomout", &r.t_ab),
+            ("default (smooth shells)", &r_def.t_ab),
+        ];
         let colors = viz::position_colors(ma.vertices());
         save(
             &transfer_row(&ma, &mb, &colors, &maps, &view)?,
@@ -140,7 +153,11 @@ pub fn pictures(args: &Args) -> anyhow::Result<()> {
         )?;
         let vmax = 0.1;
         let mut panels = Vec::new();
-        for (name, rep) in [("fmaps-init", &init), ("fmaps-zoomout", &refined)] {
+        for (name, rep) in [
+            ("fmaps-init", &init),
+            ("fmaps-zoomout", &refined),
+            ("default", &default),
+        ] {
             let per_vertex = fmaps::pictures::vertex_values(&ma, &gt_source, &rep.errors);
             let colors = viz::scalar_colors(&per_vertex, 0.0, vmax);
             panels.push(captioned(
@@ -156,11 +173,11 @@ pub fn pictures(args: &Args) -> anyhow::Result<()> {
         save(
             &plot::heatmap(
                 &format!(
-                    "C_BA after ZoomOut ({0} x {0}), {1:.1}% < 0.1",
-                    r.c_ba.nrows(),
-                    100.0 * r.metrics.sparsity
+                    "C_BA of the default ({0} x {0}), {1:.1}% < 0.1",
+                    r_def.c_ba.nrows(),
+                    100.0 * r_def.metrics.sparsity
                 ),
-                &r.c_ba,
+                &r_def.c_ba,
                 1.0,
             ),
             "fmap.png",
@@ -183,6 +200,10 @@ pub fn pictures(args: &Args) -> anyhow::Result<()> {
             curve(
                 &format!("fmaps-zoomout ({:.2})", 100.0 * refined.mean_error),
                 &refined,
+            ),
+            curve(
+                &format!("default, smooth shells ({:.2})", 100.0 * default.mean_error),
+                &default,
             ),
         ];
         let mut others = serde_json::Map::new();
@@ -211,7 +232,7 @@ pub fn pictures(args: &Args) -> anyhow::Result<()> {
         let summary = json!({
             "collection": cname, "pair": [a, b], "n_vertices": [ma.n_vertices(), mb.n_vertices()],
             "mean_error_init": init.mean_error, "mean_error_zoomout": refined.mean_error,
-            "orientation": r.orientation, "other_methods": others, "pictures": written,
+            "mean_error_default": default.mean_error, "orientation_default": r_def.orientation, "other_methods": others, "pictures": written,
             "command": "cargo xtask pictures",
         });
         std::fs::write(
@@ -219,9 +240,10 @@ pub fn pictures(args: &Args) -> anyhow::Result<()> {
             serde_json::to_string_pretty(&summary)? + "\n",
         )?;
         println!(
-            "{cname} {a} -> {b}: mean error x100 fmaps-init {:.2}, fmaps-zoomout {:.2}{}",
+            "{cname} {a} -> {b}: mean error x100 fmaps-init {:.2}, fmaps-zoomout {:.2}, default (smooth shells) {:.2}{}",
             100.0 * init.mean_error,
             100.0 * refined.mean_error,
+            100.0 * default.mean_error,
             others
                 .iter()
                 .map(|(m, e)| format!(", {m} {:.2}", 100.0 * e.as_f64().unwrap_or(f64::NAN)))
