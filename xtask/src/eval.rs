@@ -222,7 +222,8 @@ impl MapSource {
 }
 
 /// The refinement of an fmaps pipeline method, `None` for other methods:
-/// `fmaps-init` (none), `fmaps-icp` (10 iterations), `fmaps-zoomout`
+/// `fmaps-default` (what `fmaps match` runs without flags, also called
+/// `smooth-shells`), `fmaps-init` (none), `fmaps-icp` (10 iterations), `fmaps-zoomout`
 /// (50 -> 150 step 5, pyFM's schedule in `pyfm_pipeline.py`) or
 /// `fmaps-zoomout:START:FINAL:STEP`; any of them with `@K1,K2,..` appended
 /// adds starts at those initial sizes ([`fmaps::MatchParams::starts`]),
@@ -264,6 +265,8 @@ fn pipeline_method(method: &str) -> anyhow::Result<Option<PipelineMethod>> {
             "fmaps-init" => Refinement::None,
             "fmaps-icp" => Refinement::Icp(fmaps::refine::Icp::default()),
             "fmaps-zoomout" => Refinement::default_zoomout(),
+            // `fmaps match` without flags; `smooth-shells` as issue 22 names it.
+            "fmaps-default" | "smooth-shells" => Refinement::recommended(),
             "fmaps-bijective-zoomout"
             | "fmaps-discrete"
             | "fmaps-bcicp"
