@@ -370,7 +370,7 @@ impl SmoothShells {
         let starts = (0..xs.len())
             .flat_map(|o| fixed.iter().map(move |a| (o, a.clone(), 0.0)))
             .collect();
-        let mut ranked = self.proposals(xs, y, &shells, sx, sy, starts, report)?;
+        let mut ranked = self.proposals(xs, y, &shells, (sx, sy), starts, report)?;
         let mut chosen = 0;
         if xs.len() > 1 {
             chosen = self.choose_orientation(xs, y, &ranked, main, (sx, sy), report)?;
@@ -404,7 +404,7 @@ impl SmoothShells {
             };
             starts.push((chosen, start(tau, None), lap));
         }
-        ranked.extend(self.proposals(xs, y, &shells, sx, sy, starts, report)?);
+        ranked.extend(self.proposals(xs, y, &shells, (sx, sy), starts, report)?);
         ranked.sort_by(|a, b| a.0.total_cmp(&b.0));
         ranked.truncate(self.finalists.max(1));
         let finalists = ranked
@@ -465,14 +465,12 @@ impl SmoothShells {
     /// Runs proposals `(orientation, state, Laplacian weight)` over shells
     /// 6..20 in parallel; returns `(energy, orientation, state)`, best
     /// first.
-    #[allow(clippy::too_many_arguments)]
     fn proposals(
         &self,
         xs: &[Shell<'_>],
         y: &Shell<'_>,
         shells: &[Vec<(usize, level::Shells)>],
-        sx: &Samples,
-        sy: &Samples,
+        (sx, sy): (&Samples, &Samples),
         starts: Vec<(usize, Alignment, f64)>,
         report: &mut RefineReport,
     ) -> Result<Vec<(f64, usize, Alignment)>> {
@@ -522,14 +520,15 @@ impl SmoothShells {
         let ys = level::Posed::new(y.shell(&wk), y.faces);
         let all_x = Samples::new(x, (0..x.verts.len()).collect());
         let all_y = Samples::new(y, (0..y.verts.len()).collect());
-        let w = LevelWeights {
-            features: 0.25,
-            normals: 0.04,
-            laplacian: 0.0,
-            arap: 0.0,
-        };
-        let (_, t_ba) =
-            level::correspondences(&cur, &ys, (&all_x, &all_y), &w, Some(fm), false, report)?;
+        let (_, t_ba) = level::correspondences(
+            &cur,
+            &ys,
+            (&all_x, &all_y),
+            &LevelWeights::MAIN,
+            Some(fm),
+            false,
+            report,
+        )?;
         Ok(t_ba)
     }
 
@@ -547,12 +546,7 @@ impl SmoothShells {
         report: &mut RefineReport,
     ) -> Result<(f64, Alignment)> {
         let mut prev: Option<Vec<usize>> = None;
-        let mut w = LevelWeights {
-            features: 0.25,
-            normals: 0.04,
-            laplacian: 0.0,
-            arap: 0.0,
-        };
+        let mut w = LevelWeights::MAIN;
         for k in schedule(self.k_max, self.levels) {
             let t = Instant::now();
             w.arap = 0.02 * (k.saturating_sub(20) as f64).sqrt();

@@ -573,6 +573,31 @@ fn shells() -> fmaps_refine::SmoothShells {
     }
 }
 
+/// `a` with its vertices moved by `place` and renumbered (seed `seed`);
+/// `turn_faces` reverses the faces (for a mirror image, to keep them
+/// outward). Returns the copy and, per copy vertex, its vertex of `a`.
+fn renumbered_copy(
+    a: &TriMesh,
+    seed: u64,
+    turn_faces: bool,
+    place: impl Fn([f64; 3]) -> [f64; 3],
+) -> (TriMesh, Vec<usize>) {
+    let (perm, inv) = permutation(a.n_vertices(), seed);
+    let vb: Vec<[f64; 3]> = perm.iter().map(|&o| place(a.vertices()[o])).collect();
+    let fb: Vec<[usize; 3]> = a
+        .faces()
+        .iter()
+        .map(|t| {
+            if turn_faces {
+                [inv[t[0]], inv[t[2]], inv[t[1]]]
+            } else {
+                [inv[t[0]], inv[t[1]], inv[t[2]]]
+            }
+        })
+        .collect();
+    (TriMesh::new(vb, fb).unwrap(), perm)
+}
+
 #[test]
 fn smooth_shells_finds_the_identity_and_a_rotated_renumbered_copy() {
     use fmaps_mesh_io::generate::{Pose, creature};
@@ -581,20 +606,10 @@ fn smooth_shells_finds_the_identity_and_a_rotated_renumbered_copy() {
     // B: A turned by 110 degrees about a tilted axis, moved, renumbered.
     let axis = nalgebra::Vector3::new(0.3, 1.0, -0.4).normalize();
     let rot = nalgebra::Rotation3::from_axis_angle(&nalgebra::Unit::new_normalize(axis), 1.92);
-    let (perm, inv) = permutation(n, 99);
-    let vb: Vec<[f64; 3]> = perm
-        .iter()
-        .map(|&o| {
-            let p = rot * nalgebra::Vector3::from(a.vertices()[o]);
-            [p[0] + 3.0, p[1] - 1.0, p[2] + 0.5]
-        })
-        .collect();
-    let fb: Vec<[usize; 3]> = a
-        .faces()
-        .iter()
-        .map(|t| [inv[t[0]], inv[t[1]], inv[t[2]]])
-        .collect();
-    let b = TriMesh::new(vb, fb).unwrap();
+    let (b, perm) = renumbered_copy(&a, 99, false, |p| {
+        let p = rot * nalgebra::Vector3::from(p);
+        [p[0] + 3.0, p[1] - 1.0, p[2] + 0.5]
+    });
     let k = shells().k_max + 9;
     let (ba, bb) = (basis(&a, k), basis(&b, k));
     let id = DMatrix::<f64>::identity(20, 20);
@@ -638,20 +653,7 @@ fn smooth_shells_reflects_for_a_mirrored_copy_and_the_orientation_score_tells() 
     // asymmetric creature, renumbered. The true map reverses orientation.
     let a = creature(3, &Pose::walking());
     let n = a.n_vertices();
-    let (perm, inv) = permutation(n, 7);
-    let vb: Vec<[f64; 3]> = perm
-        .iter()
-        .map(|&o| {
-            let p = a.vertices()[o];
-            [-p[0], p[1], p[2]]
-        })
-        .collect();
-    let fb: Vec<[usize; 3]> = a
-        .faces()
-        .iter()
-        .map(|t| [inv[t[0]], inv[t[2]], inv[t[1]]])
-        .collect();
-    let b = TriMesh::new(vb, fb).unwrap();
+    let (b, perm) = renumbered_copy(&a, 7, true, |p| [-p[0], p[1], p[2]]);
     let k = shells().k_max + 9;
     let (ba, bb) = (basis(&a, k), basis(&b, k));
     let id = DMatrix::<f64>::identity(20, 20);

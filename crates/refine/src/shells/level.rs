@@ -270,6 +270,17 @@ pub(crate) struct LevelWeights {
     pub arap: f64,
 }
 
+impl LevelWeights {
+    /// The main alignment's weights (the paper's feature weight 0.25; its
+    /// ARAP weight grows with the level and is set there).
+    pub const MAIN: LevelWeights = LevelWeights {
+        features: 0.25,
+        normals: 0.04,
+        laplacian: 0.0,
+        arap: 0.0,
+    };
+}
+
 /// The functional map the features come from: `C` (k' x k' with
 /// `Φ_X C ≈ Φ_Y ∘ π`), the shell size `k` it was fitted at and that
 /// level's weights.
