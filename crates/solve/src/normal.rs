@@ -82,7 +82,7 @@ pub(crate) struct Normal {
     /// Added to the diagonal of H: 1e-13 of its largest free diagonal
     /// entry (as the dense path's first ridge).
     ridge: f64,
-    /// Parallel factorization (large H, more than one thread in the pool).
+    /// Parallel factorization and products (large H: k_A k_B ≥ 400).
     par: Par,
 }
 
@@ -139,7 +139,10 @@ impl Normal {
             Par::Seq,
         );
         let mask = Mat::from_fn(kb, ka, |i, j| e.w_lap * e.lap_mask[(i, j)]);
-        let par = if ka * kb >= 400 && rayon::current_num_threads() > 1 {
+        // By size only, never by the number of threads: the parallel
+        // path's arithmetic (its Cholesky, the split of the cross terms)
+        // is the same on any number of threads, so C is too.
+        let par = if ka * kb >= 400 {
             Par::rayon(0)
         } else {
             Par::Seq
@@ -780,6 +783,27 @@ mod tests {
             // direct one (beyond rounding of the energy itself).
             assert!(e.value(&c) <= e.value(&d) * (1.0 + 1e-14));
         }
+    }
+
+    /// The same C, bit for bit, on one thread and on two: the parallel
+    /// path is chosen by size, and its arithmetic does not depend on the
+    /// number of threads (it used to switch Cholesky variants and the
+    /// summation order of the cross terms).
+    #[test]
+    fn the_solution_does_not_depend_on_the_number_of_threads() {
+        let e = energy(24, 20, true);
+        let on = |threads: usize| {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap();
+            pool.install(|| e.minimize_with_report().unwrap())
+        };
+        let (c1, r1) = on(1);
+        let (c2, r2) = on(2);
+        assert_eq!(r1.method, crate::SolveMethod::Iterative);
+        assert_eq!(r1.iterations, r2.iterations);
+        assert_eq!(c1.as_slice(), c2.as_slice());
     }
 
     /// Without a useful preconditioner and with few iterations allowed
