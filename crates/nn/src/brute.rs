@@ -32,8 +32,9 @@ pub(crate) struct BruteData {
     d: usize,
     /// Rows (row-major), for the direct re-checks.
     x_rows: Vec<f64>,
-    /// Squared row norms and their largest value.
+    /// Squared row norms (f64 and rounded to f32) and their largest value.
     x_norm: Vec<f64>,
+    x_norm32: Vec<f32>,
     x_norm_max: f64,
     /// The data in f32, column-major (n x d).
     x32: Vec<f32>,
@@ -50,6 +51,7 @@ impl BruteData {
         BruteData {
             d,
             x_norm_max: x_norm.iter().fold(0.0f64, |a, &b| a.max(b)),
+            x_norm32: x_norm.iter().map(|&v| v as f32).collect(),
             x_norm,
             x32: data.as_slice().iter().map(|&v| v as f32).collect(),
             x_rows,
@@ -59,7 +61,7 @@ impl BruteData {
     /// The nearest data row of every query (same width as the data).
     pub(crate) fn search(&self, queries: &DMatrix<f64>) -> Vec<usize> {
         let (nx, d) = (self.x_norm.len(), self.d);
-        let (x_rows, x_norm, x_norm_max) = (&self.x_rows, &self.x_norm, self.x_norm_max);
+        let (x_rows, x_norm32, x_norm_max) = (&self.x_rows, &self.x_norm32, self.x_norm_max);
         let x_mat = MatRef::from_column_major_slice(&self.x32, nx, d);
         let q_rows = row_major(queries, None);
         let nq = queries.nrows();
@@ -82,9 +84,10 @@ impl BruteData {
                         .map(|i| {
                             let qi = &q_rows[(q0 + i) * d..(q0 + i + 1) * d];
                             let q_norm: f64 = qi.iter().map(|v| v * v).sum();
-                            let band = 4.0 * score_err(d, q_norm, x_norm_max);
+                            let band = 4.0 * score_err(d, q_norm, x_norm_max)
+                                + 2.0 * scan_err(q_norm, x_norm_max);
                             let col = &buf[i * nx..(i + 1) * nx];
-                            brute_query(x_rows, x_norm, col, qi, band)
+                            brute_query(x_rows, x_norm32, col, qi, band)
                         })
                         .collect()
                 })
@@ -169,35 +172,41 @@ pub(crate) fn scale_for(max: f64) -> Option<f64> {
 
 crate::cpu::dispatched! {
     /// The nearest row to `qi` given its cross terms `col` (f32) with every
-    /// row: every row whose score `|x|² − 2 q·x` is within `band` of the
-    /// smallest is re-checked with a direct f64 distance.
-    fn brute_query(x_rows: &[f64], x_norm: &[f64], col: &[f32], qi: &[f64], band: f64) -> usize {
-        // Both scans run over eight lanes at a time (`s < l ? s : l`
+    /// row: every row whose score `|x|² − 2 q·x`, computed in f32 from the
+    /// norms `x_norm32` rounded to f32, is within `band` of the smallest is
+    /// re-checked with a direct f64 distance. `band` covers the cross
+    /// terms' error ([`score_err`]) and twice the f32 scan's own
+    /// ([`scan_err`]): a row within the cross terms' band of the best exact
+    /// score is within `band` of the best f32 score.
+    fn brute_query(x_rows: &[f64], x_norm32: &[f32], col: &[f32], qi: &[f64], band: f64) -> usize {
+        // Both scans run over sixteen f32 lanes at a time (`s < l ? s : l`
         // vectorizes to min instructions; a NaN score never wins), the
         // second one looking inside a chunk only when a lane is in the band.
-        const L: usize = 8;
+        const L: usize = 16;
         let d = qi.len();
-        let score = |xn: f64, c: f32| xn - 2.0 * f64::from(c);
-        let full = x_norm.len() / L * L;
-        let mut lanes = [f64::INFINITY; L];
-        for (xs, cs) in x_norm[..full].chunks_exact(L).zip(col[..full].chunks_exact(L)) {
+        let score = |xn: f32, c: f32| xn - 2.0 * c;
+        let full = x_norm32.len() / L * L;
+        let mut lanes = [f32::INFINITY; L];
+        for (xs, cs) in x_norm32[..full].chunks_exact(L).zip(col[..full].chunks_exact(L)) {
             for ((l, &xn), &c) in lanes.iter_mut().zip(xs).zip(cs) {
                 let s = score(xn, c);
                 *l = if s < *l { s } else { *l };
             }
         }
-        let mut best = f64::INFINITY;
+        let mut best = f32::INFINITY;
         for s in lanes
             .into_iter()
-            .chain(x_norm[full..].iter().zip(&col[full..]).map(|(&xn, &c)| score(xn, c)))
+            .chain(x_norm32[full..].iter().zip(&col[full..]).map(|(&xn, &c)| score(xn, c)))
         {
             best = if s < best { s } else { best };
         }
-        let limit = best + band;
+        // The limit rounded up to the next f32 (infinite when `best` is).
+        let limit = (f64::from(best) + band) as f32;
+        let limit = if limit.is_finite() { limit.next_up() } else { limit };
         let mut arg = usize::MAX;
         let mut best_d = f64::INFINITY;
         let mut check = |k: usize, best_d: &mut f64| {
-            if score(x_norm[k], col[k]) <= limit
+            if score(x_norm32[k], col[k]) <= limit
                 && let Some(dist) = dist2_below(&x_rows[k * d..(k + 1) * d], qi, *best_d)
                 && dist < *best_d
             {
@@ -205,7 +214,7 @@ crate::cpu::dispatched! {
                 arg = k;
             }
         };
-        for (chunk, (xs, cs)) in x_norm[..full]
+        for (chunk, (xs, cs)) in x_norm32[..full]
             .chunks_exact(L)
             .zip(col[..full].chunks_exact(L))
             .enumerate()
@@ -220,9 +229,19 @@ crate::cpu::dispatched! {
                 }
             }
         }
-        for k in full..x_norm.len() {
+        for k in full..x_norm32.len() {
             check(k, &mut best_d);
         }
         arg
     }
+}
+
+/// A bound on the error of a score `|x|² − 2c` computed in f32 from `|x|²`
+/// rounded to f32 and an f32 cross term `c` (|c| ≤ |q||x|), against the
+/// same expression in f64: the rounding of the norm (`u |x|²`) and of the
+/// difference (`u (|x|² + 2|c|)`), with `2|q||x| ≤ |q|² + |x|²`, plus f32's
+/// smallest normal for a norm that underflows; doubled as a margin.
+pub(crate) fn scan_err(q_norm: f64, x_norm_max: f64) -> f64 {
+    let u = f64::from(f32::EPSILON) / 2.0;
+    2.0 * (u * (3.0 * x_norm_max + q_norm) + 2.0 * f64::from(f32::MIN_POSITIVE))
 }
