@@ -129,9 +129,55 @@ impl Refiner for Icp {
 /// The nearest orthonormal matrix `U Vᵀ` (with the rectangular identity
 /// between them for k_B ≠ k_A): orthogonal Procrustes.
 pub(crate) fn nearest_orthonormal(c: DMatrix<f64>) -> DMatrix<f64> {
+    use faer::dyn_stack::{MemBuffer, MemStack};
+    use faer::linalg::svd::{self, ComputeSvdVectors};
     let (kb, ka) = c.shape();
-    let svd = c.svd(true, true);
-    let (u, vt) = (svd.u.expect("u requested"), svd.v_t.expect("v_t requested"));
     let r = kb.min(ka);
-    u.columns(0, r) * vt.rows(0, r)
+    if r == 0 {
+        return DMatrix::zeros(kb, ka);
+    }
+    // faer's thin SVD (one thread: callers run in parallel themselves);
+    // nalgebra's is several times slower at the sizes of ZoomOut and
+    // Smooth Shells (up to 200 x 200).
+    let a = faer::MatRef::from_column_major_slice(c.as_slice(), kb, ka);
+    let (mut u, mut v) = (
+        faer::Mat::<f64>::zeros(kb, r),
+        faer::Mat::<f64>::zeros(ka, r),
+    );
+    let mut s = faer::diag::Diag::<f64>::zeros(r);
+    let par = faer::Par::Seq;
+    let thin = ComputeSvdVectors::Thin;
+    let mut mem = MemBuffer::new(svd::svd_scratch::<f64>(
+        kb,
+        ka,
+        thin,
+        thin,
+        par,
+        Default::default(),
+    ));
+    let done = svd::svd(
+        a,
+        s.as_mut(),
+        Some(u.as_mut()),
+        Some(v.as_mut()),
+        par,
+        MemStack::new(&mut mem),
+        Default::default(),
+    );
+    if done.is_err() {
+        // No convergence (non-finite entries): nalgebra's SVD as before.
+        let svd = c.svd(true, true);
+        let (u, vt) = (svd.u.expect("u requested"), svd.v_t.expect("v_t requested"));
+        return u.columns(0, r) * vt.rows(0, r);
+    }
+    let mut out = DMatrix::zeros(kb, ka);
+    faer::linalg::matmul::matmul(
+        faer::MatMut::from_column_major_slice_mut(out.as_mut_slice(), kb, ka),
+        faer::Accum::Replace,
+        u.as_ref(),
+        v.as_ref().transpose(),
+        1.0,
+        par,
+    );
+    out
 }
