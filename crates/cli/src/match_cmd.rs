@@ -404,6 +404,7 @@ pub(crate) fn match_cmd(args: &MatchArgs) -> Result<(), Failure> {
                 "nn_seconds": rep.nn_seconds, "seconds": rep.seconds,
                 "final_k": r.c_ba.ncols(),
                 "changed_per_iteration": rep.iterations.iter().map(|i| i.changed).collect::<Vec<_>>(),
+                "seconds_per_iteration": rep.iterations.iter().map(|i| i.seconds).collect::<Vec<_>>(),
             })),
             "orientation": r.orientation,
             "quality": quality,

@@ -24,18 +24,17 @@
 //! each scored by a short surrogate alignment over shells 2..20), then
 //! proposals, each aligned over shells 6..20 and scored by the alignment
 //! energy (area-weighted distance of matched points and normals, both
-//! directions, at full detail). The fixed proposals — the unperturbed
-//! shell, the input functional map, and the sign hypotheses of φ_2..φ_5
-//! (every choice of signs as the first features' map, the issue's
-//! "eigenfunction sign choices") — run for the two best rigid
-//! orientations; the best of each runs a short main alignment (12
-//! levels), and the orientation whose map preserves orientation best is
-//! kept: the surrogate cannot tell a body facing forwards from one facing
-//! backwards, the folds of the wrong one's map can. Then random coarse
-//! deformations `τ[:6]` (scaled by the shell's own coefficients, half of
-//! them with Laplacian commutativity in the map fit, as in the authors'
-//! code) on that orientation. The best proposal's τ and functional map
-//! start the full alignment (the map is held fixed up to shell 20).
+//! directions, at full detail). Each of the two best rigid orientations
+//! gets the fixed proposals — the unperturbed shell, the input functional
+//! map, and the sign hypotheses of φ_2..φ_5 (every choice of signs as the
+//! first features' map, the "eigenfunction sign choices") — and
+//! 60 random coarse deformations `τ[:6]` (scaled by the shell's own
+//! coefficients, half of them with Laplacian commutativity in the map
+//! fit, as in the authors' code). Each orientation's best proposal (τ and
+//! functional map, the map held fixed up to shell 20) runs the whole
+//! alignment, and the orientation whose final map preserves orientation
+//! best is kept: the surrogate cannot tell a body facing forwards from
+//! one facing backwards, the folds of the wrong one's map can.
 //! Proposals and orientations run in parallel. `reflect` aligns A's
 //! mirror image instead (for a B that is a mirror image of A).
 //!
@@ -49,18 +48,14 @@
 //! the classic local/global one (per-vertex rotations by Procrustes, then
 //! least squares in τ); the proposals are independent draws, the best
 //! kept (optionally the best `finalists` run the whole alignment and the
-//! lowest final energy wins); 60 random proposals instead of 100 (with the
-//! orientation choice, 100 put the default over its time budget; 38
-//! against 98 changed FAUST_r by 0.006 and the non-isometric bodies by 0.7
-//! x100, README).
+//! lowest final energy wins); 60 random proposals for each of two
+//! orientations instead of 100 for one (README).
 
 mod level;
 mod rigid;
 
 /// The smallest shell of the proposals.
 const K_MIN: usize = 6;
-/// Levels of the short alignments that choose among orientations.
-const PROBE_LEVELS: usize = 12;
 
 /// What the main alignment works on: its samples of both shapes and the
 /// ARAP Gram matrix of X.
@@ -105,21 +100,22 @@ pub struct SmoothShells {
     pub samples: usize,
     /// Samples per shape in the initialisation (the paper: 1000).
     pub init_samples: usize,
-    /// Random deformation proposals of the initialisation (the paper:
-    /// 100; here 60), besides the unperturbed shell, the sign hypotheses
-    /// and the input map.
+    /// Random deformation proposals of the initialisation per orientation
+    /// (the paper: 100, one orientation; here 60 for each of two),
+    /// besides the unperturbed shell, the sign hypotheses and the input
+    /// map.
     pub proposals: usize,
     /// Seed of the proposals (the result is deterministic for a seed).
     pub seed: u64,
     /// Align the shapes rigidly first (off: they are given aligned).
     pub rigid: bool,
     /// Rigid orientations (best first by their surrogate energy) that the
-    /// initialisation tries: each runs the fixed proposals, and the one
-    /// whose best proposal's map preserves orientation best gets the
-    /// random proposals. The surrogate alignment tells a body facing
-    /// forwards from one facing backwards poorly (on FAUST_r it picked the
-    /// wrong one for 1 pair in 60); the orientation score of the maps
-    /// tells them apart.
+    /// initialisation tries: each runs the fixed and random proposals and
+    /// the whole alignment from its best, and the one whose final map
+    /// preserves orientation best is kept. The surrogate alignment tells a
+    /// body facing forwards from one facing backwards poorly (on FAUST_r
+    /// the best of its orientations was the wrong one for 7 pairs in 190);
+    /// the orientation score of the final maps tells them apart.
     pub orientations: usize,
     /// B is a mirror image of A (the correspondence reverses orientation):
     /// A's reflection is aligned instead of A, so the map found reverses
@@ -310,22 +306,19 @@ impl SmoothShells {
         Ok(ranked.into_iter().map(|(_, r)| r).collect())
     }
 
-    /// The initialisation: the fixed proposals (the unperturbed shell,
-    /// the input map, the sign hypotheses) for each orientation `xs` of X;
-    /// the orientation whose best proposal's map preserves orientation best
-    /// is kept (a body aligned facing the wrong way fits the shells almost
-    /// as well, but its map folds); then the random proposals on that
-    /// orientation. Returns the orientation and the best `finalists` (τ
-    /// and the functional map to hold fixed up to shell 20), best first.
+    /// The initialisation: for each orientation `xs` of X, the fixed
+    /// proposals (the unperturbed shell, the input map, the sign
+    /// hypotheses) and its share of the random proposals, all over shells
+    /// 6..20. Returns, per orientation, its best `finalists` (τ and the
+    /// functional map to hold fixed up to shell 20), best first.
     fn initialise(
         &self,
         xs: &[Shell<'_>],
         y: &Shell<'_>,
         (sx, sy): (&Samples, &Samples),
         input: Option<&level::FeatureMap>,
-        main: Main<'_>,
         report: &mut RefineReport,
-    ) -> Result<(usize, Vec<Alignment>)> {
+    ) -> Result<Vec<Vec<Alignment>>> {
         let kt = self.k_max + 9;
         let zero = || DMatrix::<f64>::zeros(kt, 3);
         let start = |tau, fmap| Alignment {
@@ -367,99 +360,101 @@ impl SmoothShells {
                     .collect()
             })
             .collect();
-        let starts = (0..xs.len())
+        let mut starts: Vec<(usize, Alignment, f64)> = (0..xs.len())
             .flat_map(|o| fixed.iter().map(move |a| (o, a.clone(), 0.0)))
             .collect();
-        let mut ranked = self.proposals(xs, y, &shells, (sx, sy), starts, report)?;
-        let mut chosen = 0;
-        if xs.len() > 1 {
-            chosen = self.choose_orientation(xs, y, &ranked, main, (sx, sy), report)?;
-            ranked.retain(|r| r.1 == chosen);
-        }
         // Random coarse deformations (scaled by the shell's own
-        // coefficients); every other one fits the map with Laplacian
+        // coefficients, which a rotation keeps), dealt to the orientations
+        // in turn; every other one fits the map with Laplacian
         // commutativity.
         let sigma: Vec<f64> = (0..K_MIN)
-            .map(|i| {
-                if i == 0 {
-                    0.0
-                } else {
-                    xs[chosen].xi.row(i).norm()
-                }
-            })
+            .map(|i| if i == 0 { 0.0 } else { xs[0].xi.row(i).norm() })
             .collect();
         let mut rng = Rng(self.seed);
-        let mut starts = Vec::with_capacity(self.proposals);
-        for i in 0..self.proposals {
+        for i in 0..self.proposals * xs.len() {
             let mut tau = zero();
             for r in 1..K_MIN {
                 for d in 0..3 {
                     tau[(r, d)] = sigma[r] * rng.normal();
                 }
             }
-            let lap = if (n_fixed + i).is_multiple_of(2) {
+            let o = i % xs.len();
+            let lap = if (n_fixed + i / xs.len()).is_multiple_of(2) {
                 0.0
             } else {
                 10.0
             };
-            starts.push((chosen, start(tau, None), lap));
+            starts.push((o, start(tau, None), lap));
         }
-        ranked.extend(self.proposals(xs, y, &shells, (sx, sy), starts, report)?);
-        ranked.sort_by(|a, b| a.0.total_cmp(&b.0));
-        ranked.truncate(self.finalists.max(1));
-        let finalists = ranked
-            .into_iter()
-            .map(|(_, _, best)| as_start(best))
-            .collect();
-        Ok((chosen, finalists))
+        let ranked = self.proposals(xs, y, &shells, (sx, sy), starts, report)?;
+        let mut best: Vec<Vec<Alignment>> = vec![Vec::new(); xs.len()];
+        for (_, o, state) in ranked {
+            if best[o].len() < self.finalists.max(1) {
+                best[o].push(as_start(state));
+            }
+        }
+        Ok(best)
     }
 
-    /// The orientation whose best proposal so far (in `ranked`) leads to
-    /// the best-oriented map after a short main alignment (`PROBE_LEVELS`
-    /// levels up to `k_max`, in parallel): a body aligned facing the wrong
-    /// way fits the shells about as well, but its map folds over.
-    fn choose_orientation(
+    /// The whole alignment of each orientation's finalists (orientations
+    /// in parallel; within one, the lowest final energy wins), then the
+    /// orientation whose final map preserves orientation best: a body
+    /// aligned facing the wrong way fits the shells about as well, but
+    /// its map folds over. Returns its state and its point map of Y onto
+    /// X.
+    fn finish(
         &self,
         xs: &[Shell<'_>],
         y: &Shell<'_>,
-        ranked: &[(f64, usize, Alignment)],
+        finalists: Vec<Vec<Alignment>>,
         main: Main<'_>,
         init: (&Samples, &Samples),
         report: &mut RefineReport,
-    ) -> Result<usize> {
-        let probe = SmoothShells {
-            levels: PROBE_LEVELS,
-            ..self.clone()
-        };
-        let bests: Vec<(usize, Alignment)> = (0..xs.len())
-            .filter_map(|o| {
-                let best = ranked.iter().find(|r| r.1 == o)?;
-                Some((o, as_start(best.2.clone())))
-            })
-            .collect();
+    ) -> Result<(Alignment, Vec<usize>)> {
         // A reflected X keeps its faces: its orientation is reversed.
         let sign = if self.reflect { -1.0 } else { 1.0 };
-        let scores: Vec<Result<(usize, f64, RefineReport)>> = bests
+        type Run = (f64, Alignment, Vec<usize>, RefineReport);
+        let runs: Vec<Result<Run>> = finalists
             .into_par_iter()
-            .map(|(o, start)| {
+            .enumerate()
+            .map(|(o, starts)| {
                 let mut rep = RefineReport::start(String::new());
                 let x = &xs[o];
-                let (_, state) =
-                    probe.align(x, y, main.samples, init, main.gram, start, &mut rep)?;
+                let mut best: Option<(f64, Alignment)> = None;
+                for start in starts {
+                    let (e, state) =
+                        self.align(x, y, main.samples, init, main.gram, start, &mut rep)?;
+                    if best.as_ref().is_none_or(|b| e < b.0) {
+                        best = Some((e, state));
+                    }
+                }
+                let (_, state) = best.expect("at least one finalist");
                 let map = Self::point_map(x, y, &state, self.k_max, &mut rep)?;
-                let score = crate::orientation_score(&map, &y.verts, y.faces, &x.verts, x.faces)?;
-                Ok((o, sign * score, rep))
+                let score = if xs.len() > 1 {
+                    sign * crate::orientation_score(&map, &y.verts, y.faces, &x.verts, x.faces)?
+                } else {
+                    0.0
+                };
+                Ok((score, state, map, rep))
             })
             .collect();
-        let mut best = (f64::NEG_INFINITY, 0);
-        for s in scores {
-            let (o, score, rep) = s?;
-            merge(report, &rep);
-            if score > best.0 {
-                best = (score, o);
+        let mut done: Vec<Run> = Vec::with_capacity(runs.len());
+        for run in runs {
+            let run = run?;
+            merge(report, &run.3);
+            done.push(run);
+        }
+        // The first of the best-oriented (a NaN score never wins).
+        let mut kept = 0;
+        for (o, run) in done.iter().enumerate() {
+            if run.0 > done[kept].0 {
+                kept = o;
             }
         }
-        Ok(best.1)
+        let (_, state, map, rep) = done.swap_remove(kept);
+        // The kept orientation's levels are the report's iterations.
+        report.iterations.extend(rep.iterations);
+        Ok((state, map))
     }
 
     /// Runs proposals `(orientation, state, Laplacian weight)` over shells
@@ -665,25 +660,13 @@ impl Refiner for SmoothShells {
             samples: (&sx, &sy),
             gram: &gram,
         };
-        let (chosen, finalists) =
-            self.initialise(&xs, &y, (&ix, &iy), Some(&input), main, &mut report)?;
+        let finalists = self.initialise(&xs, &y, (&ix, &iy), Some(&input), &mut report)?;
         report.iterations.push(Iteration {
             k: (6, 20),
             changed: 0,
             seconds: t.elapsed().as_secs_f64(),
         });
-        let x = &xs[chosen];
-        let mut best: Option<(f64, Alignment)> = None;
-        for start in finalists {
-            let (e, state) =
-                self.align(x, &y, (&sx, &sy), (&ix, &iy), &gram, start, &mut report)?;
-            if best.as_ref().is_none_or(|b| e < b.0) {
-                best = Some((e, state));
-            }
-        }
-        let (_, state) = best.expect("at least one finalist");
-        // The final map on all vertices, in the last level's product space.
-        let t_ba = Self::point_map(x, &y, &state, self.k_max, &mut report)?;
+        let (state, t_ba) = self.finish(&xs, &y, finalists, main, (&ix, &iy), &mut report)?;
         let fm = state.fmap.expect("at least one level ran");
         report.converged = true;
         report.seconds = t0.elapsed().as_secs_f64();

@@ -183,28 +183,34 @@ fn v3(p: [f64; 3]) -> Vector3<f64> {
 /// Area-weighted vertex normals, oriented outwards (a closed mesh whose
 /// signed volume is negative has its normals flipped).
 pub(crate) fn normals(verts: &[[f64; 3]], faces: &[[usize; 3]]) -> Vec<[f64; 3]> {
-    let mut n = vec![Vector3::zeros(); verts.len()];
+    let sub = |p: [f64; 3], q: [f64; 3]| [p[0] - q[0], p[1] - q[1], p[2] - q[2]];
+    let cross = |p: [f64; 3], q: [f64; 3]| {
+        [
+            p[1] * q[2] - p[2] * q[1],
+            p[2] * q[0] - p[0] * q[2],
+            p[0] * q[1] - p[1] * q[0],
+        ]
+    };
+    let mut n = vec![[0.0f64; 3]; verts.len()];
     let mut volume = 0.0;
     for f in faces {
-        let (a, b, c) = (v3(verts[f[0]]), v3(verts[f[1]]), v3(verts[f[2]]));
-        let fnrm = (b - a).cross(&(c - a));
-        volume += a.dot(&b.cross(&c));
+        let (a, b, c) = (verts[f[0]], verts[f[1]], verts[f[2]]);
+        let fnrm = cross(sub(b, a), sub(c, a));
+        let bc = cross(b, c);
+        volume += a[0] * bc[0] + a[1] * bc[1] + a[2] * bc[2];
         for &i in f {
-            n[i] += fnrm;
+            for d in 0..3 {
+                n[i][d] += fnrm[d];
+            }
         }
     }
     let sign = if volume < 0.0 { -1.0 } else { 1.0 };
-    n.iter()
-        .map(|v| {
-            let l = v.norm();
-            if l > 0.0 {
-                let u = v * (sign / l);
-                [u[0], u[1], u[2]]
-            } else {
-                [0.0; 3]
-            }
-        })
-        .collect()
+    for v in &mut n {
+        let l = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+        let s = if l > 0.0 { sign / l } else { 0.0 };
+        *v = [v[0] * s, v[1] * s, v[2] * s];
+    }
+    n
 }
 
 /// Points of a shape (its shell, deformed or not) with their normals.
@@ -252,6 +258,10 @@ impl std::ops::Deref for Samples {
 /// of the coordinates' to the normals' norms on the samples, averaged
 /// over both shapes.
 fn normal_scale(px: &Posed, py: &Posed, sx: &[usize], sy: &[usize], normals: f64) -> f64 {
+    if normals == 0.0 {
+        // The normals may not have been computed (see [`level`]).
+        return 0.0;
+    }
     let part =
         |p: &Posed, s: &[usize]| normals * frob(&p.pts, s) / frob(&p.nrm, s).max(f64::MIN_POSITIVE);
     0.5 * (part(px, sx) + part(py, sy))
@@ -301,15 +311,17 @@ fn embed(
     feat: Option<(&DMatrix<f64>, f64)>,
 ) -> Mat<f64> {
     let kf = feat.map_or(0, |(f, _)| f.ncols());
-    Mat::from_fn(idx.len(), 6 + kf, |r, c| {
+    // Normals at weight 0 are left out (their columns would be 0).
+    let kn = if fn_ == 0.0 { 0 } else { 3 };
+    Mat::from_fn(idx.len(), 3 + kn + kf, |r, c| {
         let i = idx[r];
-        match c {
-            0..=2 => pts[i][c],
-            3..=5 => fn_ * nrm[i][c - 3],
-            _ => {
-                let (f, s) = feat.expect("features");
-                s * f[(r, c - 6)]
-            }
+        if c < 3 {
+            pts[i][c]
+        } else if c < 3 + kn {
+            fn_ * nrm[i][c - 3]
+        } else {
+            let (f, s) = feat.expect("features");
+            s * f[(r, c - 3 - kn)]
         }
     })
 }
@@ -459,22 +471,48 @@ pub(crate) fn level(
     let (wk, xs, ys) = (&shells.weights, &shells.x, &shells.y);
     let kk = wk.len().min(x.phi.ncols()).min(y.phi.ncols());
     let kd = k.min(kk);
-    let cur = Posed::new(x.deform(xs, &state.tau, kd), x.faces);
+    let pts = x.deform(xs, &state.tau, kd);
+    let cur = if w.normals > 0.0 {
+        Posed::new(pts, x.faces)
+    } else {
+        // Normals at weight 0 do not enter the correspondences.
+        Posed {
+            pts,
+            nrm: Vec::new(),
+        }
+    };
     let (ab, ba) = correspondences(&cur, ys, (sx, sy), w, state.fmap.as_ref(), true, report)?;
 
     // Deformation: Σ ‖XS(s) + Φ(s)τ − YS(π s)‖² over both directions
-    // (pairs of sample positions).
+    // (pairs of sample positions). Each X sample's pairs share its row of
+    // Φ: the normal equations weight the row by its number of pairs and
+    // sum its residuals (and, for the map, its partners' rows of Φ_Y).
     let pairs: Vec<(usize, usize)> = (0..sx.len())
         .zip(ab.iter().copied())
         .chain(ba.iter().copied().zip(0..sy.len()))
         .collect();
-    let a = DMatrix::from_fn(pairs.len(), kd, |r, i| sx.phi[(pairs[r].0, i)]);
-    let res = DMatrix::from_fn(pairs.len(), 3, |r, d| {
-        let (xi, yi) = pairs[r];
-        ys.pts[sy[yi]][d] - xs[sx[xi]][d]
-    });
-    let mut m = mul(&a, true, &a);
-    let mut z = mul(&a, true, &res);
+    let mut count = vec![0.0f64; sx.len()];
+    let mut res = DMatrix::<f64>::zeros(sx.len(), 3);
+    for &(xi, yi) in &pairs {
+        count[xi] += 1.0;
+        for d in 0..3 {
+            res[(xi, d)] += ys.pts[sy[yi]][d] - xs[sx[xi]][d];
+        }
+    }
+    let mut partners = DMatrix::<f64>::zeros(sx.len(), kk);
+    for c in 0..kk {
+        let (from, to) = (sy.phi.column(c), &mut partners.column_mut(c));
+        for &(xi, yi) in &pairs {
+            to[xi] += sx.sqrt_mass[xi] * from[yi];
+        }
+    }
+    let a = view(&sx.phi, kd);
+    let weighted = |w: &dyn Fn(usize) -> f64, cols: usize| {
+        DMatrix::from_fn(sx.len(), cols, |r, c| w(r) * sx.phi[(r, c)])
+    };
+    let ca = weighted(&|r| count[r], kd);
+    let mut m = mul_ref(view(&ca, kd), true, a);
+    let mut z = mul_ref(a, true, view(&res, 3));
     if let (Some(g), true) = (arap_gram, w.arap > 0.0) {
         let ga = g.view((0, 0), (kd, kd));
         let rot = rotations(xs, &cur.pts, &x.neighbours);
@@ -500,16 +538,11 @@ pub(crate) fn level(
     }
 
     // Functional map on the correspondences (area weighted).
-    let ax = DMatrix::from_fn(pairs.len(), kk, |r, c| {
-        let i = pairs[r].0;
-        sx.sqrt_mass[i] * sx.phi[(i, c)]
-    });
-    let ay = DMatrix::from_fn(pairs.len(), kk, |r, c| {
-        let (i, j) = pairs[r];
-        sx.sqrt_mass[i] * sy.phi[(j, c)]
-    });
-    let mm = mul(&ax, true, &ax);
-    let zz = mul(&ax, true, &ay);
+    let ax = view(&sx.phi, kk);
+    let cm = weighted(&|r| count[r] * sx.sqrt_mass[r] * sx.sqrt_mass[r], kk);
+    let mm = mul_ref(view(&cm, kk), true, ax);
+    let wx = weighted(&|r| sx.sqrt_mass[r], kk);
+    let zz = mul_ref(view(&wx, kk), true, view(&partners, kk));
     let mut c = DMatrix::<f64>::zeros(kk, kk);
     if w.laplacian > 0.0 {
         let l = DMatrix::from_fn(kk, kk, |i, j| (x.evals[i] - y.evals[j]).abs().sqrt());
