@@ -3,7 +3,8 @@
 //! builds in two poses, each shape remeshed independently, against the
 //! exact template correspondence; graph
 //! geodesics (the exact figures come from `cargo xtask eval --collection
-//! generated-iso`).
+//! generated-iso`); and the default pipeline gives the same result on one
+//! thread and on two.
 
 use fmaps::eval::{EvalParams, GroundTruth, evaluate};
 use fmaps::geodesic::DijkstraSolver;
@@ -80,4 +81,35 @@ fn smooth_shells_matches_two_builds_in_two_poses() {
     // (graph geodesics, seed 1 of its proposals).
     assert!(e < 0.08, "smooth shells mean error {e}");
     assert!(e < 0.3 * e_init, "{e_init} -> {e}");
+}
+
+/// The default pipeline (Smooth Shells) gives the same map and functional
+/// map, bit for bit, on one thread and on two: no stage's arithmetic
+/// depends on the number of threads (the eigensolver's dense Ritz step
+/// and the functional-map solve used to).
+#[test]
+fn the_default_pipeline_does_not_depend_on_the_number_of_threads() {
+    let body = Body::template();
+    let a = body
+        .shape(&Build::random(3), &BodyPose::rest(), 0.07, 1)
+        .unwrap();
+    let b = body
+        .shape(&Build::random(4), &BodyPose::walking(), 0.065, 2)
+        .unwrap();
+    let params = MatchParams {
+        refine: Refinement::recommended(),
+        ..MatchParams::default()
+    };
+    let on = |threads: usize| {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap();
+        pool.install(|| match_shapes(&a.mesh, &b.mesh, &params).unwrap())
+    };
+    let (one, two) = (on(1), on(2));
+    assert!(one.refine.is_some(), "the default refines");
+    assert_eq!(one.t_ab, two.t_ab);
+    assert_eq!(one.t_ab_init, two.t_ab_init);
+    assert_eq!(one.c_ba.as_slice(), two.c_ba.as_slice());
 }

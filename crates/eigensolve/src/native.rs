@@ -19,7 +19,7 @@ use std::time::Instant;
 
 use faer::linalg::matmul::matmul;
 use faer::reborrow::{Reborrow, ReborrowMut};
-use faer::{Accum, Mat, MatMut, MatRef, Side};
+use faer::{Accum, Mat, MatMut, MatRef};
 use nalgebra::{DMatrix, DVector};
 
 use crate::factor::{Factorization, ShiftInvert, par_of};
@@ -269,15 +269,34 @@ fn krylov_schur(
         }
 
         // Ritz pairs of the projected matrix, θ descending.
-        let hm = h.as_ref().submatrix(0, 0, m, m).to_owned();
-        let evd = hm
-            .self_adjoint_eigen(Side::Lower)
+        // One thread, explicitly: faer's default (its global parallelism)
+        // splits the tridiagonalization by the pool's size, and the basis
+        // then differs in the last digits between thread counts.
+        let (mut u, mut s) = (Mat::<f64>::zeros(m, m), faer::diag::Diag::<f64>::zeros(m));
+        {
+            use faer::dyn_stack::{MemBuffer, MemStack};
+            use faer::linalg::evd;
+            let seq = faer::Par::Seq;
+            let mut mem = MemBuffer::new(evd::self_adjoint_evd_scratch::<f64>(
+                m,
+                evd::ComputeEigenvectors::Yes,
+                seq,
+                Default::default(),
+            ));
+            evd::self_adjoint_evd(
+                h.as_ref().submatrix(0, 0, m, m),
+                s.as_mut(),
+                Some(u.as_mut()),
+                seq,
+                MemStack::new(&mut mem),
+                Default::default(),
+            )
             .map_err(|e| Error::Backend {
                 backend: "native",
                 message: format!("dense eigensolver: {e:?}"),
             })?;
-        let s = evd.S().column_vector();
-        let u = evd.U();
+        }
+        let (s, u) = (s.column_vector(), u.as_ref());
         let order: Vec<usize> = (0..m).rev().collect();
         let theta: Vec<f64> = order.iter().map(|&i| s[i]).collect();
         // Residual of Ritz pair i: ‖R · y_i[m−b..m]‖.
