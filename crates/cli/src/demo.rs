@@ -163,14 +163,14 @@ fn creature_case(subdivisions: u32) -> Result<Case, Failure> {
 }
 
 /// Two individuals of the generated body collection, walking and
-/// reaching (`body_0_1 -> body_1_3` of `cargo xtask eval --collection
+/// reaching (`body_0_1 -> body_5_3` of `cargo xtask eval --collection
 /// generated-noniso`): limbs, girths and torso of different proportions,
 /// independent meshes, ground truth through the template.
 fn body_case() -> Result<Case, Failure> {
     let body = Body::template();
     let (sa, sb) = (
         body.collection_shape(0, 1).map_err(runtime)?,
-        body.collection_shape(1, 3).map_err(runtime)?,
+        body.collection_shape(5, 3).map_err(runtime)?,
     );
     let points = body.truth_points().map_err(runtime)?;
     let mirror: Vec<[f64; 3]> = points.iter().map(|&p| mirrored(p)).collect();
