@@ -126,8 +126,9 @@ pub struct SmoothShells {
     pub reflect: bool,
     /// Add the input functional map as a proposal.
     pub use_input_map: bool,
-    /// Proposals (best first by the initialisation's energy) that run the
-    /// whole alignment; the one with the lowest final energy is kept.
+    /// Proposals per orientation (best first by the initialisation's
+    /// energy) that run the whole alignment; within an orientation the
+    /// one with the lowest final energy is kept.
     pub finalists: usize,
     /// Eigenfunctions φ_2.. whose signs the initialisation tries in every
     /// combination (0: none; at most 5).
