@@ -12,14 +12,31 @@ use crate::rows::{dist2_below, row_major};
 /// Queries per block.
 const BLOCK: usize = 256;
 
+/// Data rows per panel of the fused search (sixteen f32 lanes: one
+/// AVX-512 vector, two AVX2 ones).
+pub(crate) const PANEL: usize = 16;
+/// Queries scored together by the fused search: each panel's coordinates
+/// are loaded once for all of them, and their scores (`GROUP` x rows f32)
+/// stay in the first-level cache for the second scan.
+pub(crate) const GROUP: usize = 4;
+/// Queries per parallel task of the fused search.
+const FUSED_BLOCK: usize = 64;
+/// Widest data the fused search takes. Up to here, writing every score of
+/// a 256-query block to memory and reading it back twice costs more than
+/// the products; from 32 to 48 both paths measured the same, and wider
+/// the GEMM's register blocking wins (crate README, "Choosing a
+/// strategy").
+pub(crate) const FUSED_MAX_DIM: usize = 32;
+
 thread_local! {
     /// Per thread, the scores of one block (kept between searches: many
     /// small searches would otherwise spend their time zeroing it).
     static SCORES: RefCell<Vec<f32>> = const { RefCell::new(Vec::new()) };
 }
 
-/// Every query against every data row: blocked f32 GEMMs select the rows
-/// within [`score_err`]'s band of the best score, re-checked in f64.
+/// Every query against every data row: f32 scores (by blocked GEMMs, or
+/// by the fused kernel up to [`FUSED_MAX_DIM`] coordinates) select the
+/// rows within a rigorous band of the best score, re-checked in f64.
 /// Exact at any scale (the band covers underflow); fast where the
 /// coordinates are well inside f32's range.
 pub(crate) fn brute_search(data: &DMatrix<f64>, queries: &DMatrix<f64>) -> Vec<usize> {
@@ -36,8 +53,16 @@ pub(crate) struct BruteData {
     x_norm: Vec<f64>,
     x_norm32: Vec<f32>,
     x_norm_max: f64,
-    /// The data in f32, column-major (n x d).
+    /// The data in f32, column-major (n x d) (empty where the fused
+    /// search runs).
     x32: Vec<f32>,
+    /// For the fused search (d ≤ [`FUSED_MAX_DIM`]; else empty): the data
+    /// in f32 by panels of [`PANEL`] rows, coordinate by coordinate
+    /// (`[panel][coordinate][row]`), and the squared norms in f32 by
+    /// panels, the last panel padded with rows of zeros whose norm is
+    /// `+∞` (their score is `+∞`: never in a band).
+    pub(crate) panels: Vec<f32>,
+    pub(crate) panel_norms: Vec<f32>,
 }
 
 impl BruteData {
@@ -48,18 +73,97 @@ impl BruteData {
             .chunks(d.max(1))
             .map(|r| r.iter().map(|v| v * v).sum())
             .collect();
+        let n = x_norm.len();
+        let fused = n > 0 && (1..=FUSED_MAX_DIM).contains(&d);
+        let (mut panels, mut panel_norms) = (Vec::new(), Vec::new());
+        if fused {
+            let np = n.div_ceil(PANEL);
+            panels = vec![0.0f32; np * d * PANEL];
+            panel_norms = vec![f32::INFINITY; np * PANEL];
+            for (i, row) in x_rows.chunks_exact(d.max(1)).enumerate().take(n) {
+                let (p, l) = (i / PANEL, i % PANEL);
+                for (j, &v) in row.iter().enumerate() {
+                    panels[(p * d + j) * PANEL + l] = v as f32;
+                }
+                panel_norms[i] = x_norm[i] as f32;
+            }
+        }
         BruteData {
             d,
             x_norm_max: x_norm.iter().fold(0.0f64, |a, &b| a.max(b)),
             x_norm32: x_norm.iter().map(|&v| v as f32).collect(),
             x_norm,
-            x32: data.as_slice().iter().map(|&v| v as f32).collect(),
+            x32: if fused {
+                Vec::new()
+            } else {
+                data.as_slice().iter().map(|&v| v as f32).collect()
+            },
             x_rows,
+            panels,
+            panel_norms,
         }
+    }
+
+    /// The fused search: per group of [`GROUP`] queries, every score
+    /// `|x|² − 2 q·x` in f32 panel by panel (the products and their lane
+    /// minima in registers, the scores kept for the second scan), then
+    /// each query's rows within [`fused_err`]'s band of its best score
+    /// re-checked in f64.
+    fn search_fused(&self, queries: &DMatrix<f64>) -> Vec<usize> {
+        let (nx, d) = (self.x_norm.len(), self.d);
+        let np = nx.div_ceil(PANEL);
+        let q_rows = row_major(queries, None);
+        let nq = queries.nrows();
+        let starts: Vec<usize> = (0..nq).step_by(FUSED_BLOCK).collect();
+        let blocks: Vec<Vec<usize>> = starts
+            .par_iter()
+            .map(|&q0| {
+                let end = (q0 + FUSED_BLOCK).min(nq);
+                let mut out = Vec::with_capacity(end - q0);
+                SCORES.with_borrow_mut(|buf| {
+                    if buf.len() < GROUP * np * PANEL {
+                        buf.resize(GROUP * np * PANEL, 0.0);
+                    }
+                    let scores = &mut buf[..GROUP * np * PANEL];
+                    let mut c = [0.0f32; GROUP * FUSED_MAX_DIM];
+                    for g0 in (q0..end).step_by(GROUP) {
+                        let gn = GROUP.min(end - g0);
+                        // −2q in f32 (exact doubling); missing queries of
+                        // the last group are zeros.
+                        c.fill(0.0);
+                        for g in 0..gn {
+                            let qi = &q_rows[(g0 + g) * d..(g0 + g + 1) * d];
+                            for (cj, &v) in c[g * d..(g + 1) * d].iter_mut().zip(qi) {
+                                *cj = -2.0 * (v as f32);
+                            }
+                        }
+                        let best = fused_scores(
+                            &self.panels,
+                            &self.panel_norms,
+                            d,
+                            &c[..GROUP * d],
+                            scores,
+                        );
+                        for (g, &b) in best.iter().enumerate().take(gn) {
+                            let qi = &q_rows[(g0 + g) * d..(g0 + g + 1) * d];
+                            let q_norm: f64 = qi.iter().map(|v| v * v).sum();
+                            let band = 2.0 * fused_err(d, q_norm, self.x_norm_max);
+                            let col = &scores[g * np * PANEL..(g + 1) * np * PANEL];
+                            out.push(fused_pick(&self.x_rows, col, nx, b, qi, band));
+                        }
+                    }
+                });
+                out
+            })
+            .collect();
+        blocks.into_iter().flatten().collect()
     }
 
     /// The nearest data row of every query (same width as the data).
     pub(crate) fn search(&self, queries: &DMatrix<f64>) -> Vec<usize> {
+        if !self.panels.is_empty() {
+            return self.search_fused(queries);
+        }
         let (nx, d) = (self.x_norm.len(), self.d);
         let (x_rows, x_norm32, x_norm_max) = (&self.x_rows, &self.x_norm32, self.x_norm_max);
         let x_mat = MatRef::from_column_major_slice(&self.x32, nx, d);
@@ -244,4 +348,153 @@ crate::cpu::dispatched! {
 pub(crate) fn scan_err(q_norm: f64, x_norm_max: f64) -> f64 {
     let u = f64::from(f32::EPSILON) / 2.0;
     2.0 * (u * (3.0 * x_norm_max + q_norm) + 2.0 * f64::from(f32::MIN_POSITIVE))
+}
+
+/// A bound on the error of a score `|x|² − 2 q·x` as the fused search
+/// computes it in f32 (`q_norm` = |q|², `x_norm_max` ≥ |x|²): `|x|²`
+/// rounded to f32, then the d products `(−2q_j) x_j` of the f32 copies
+/// added one by one, each product and each sum rounded. Relative
+/// rounding (u = 2⁻²⁴): the norm `u|x|²`, the conversions `(2u + u²)`
+/// and the products `u` of each `2|q_j x_j|` (at most `(3u + u²) 2|q||x|`
+/// in all), the d sums `u` of partial sums at most `(1 + u)|x|² + (1 +
+/// 3u)2|q||x|`; with `2|q||x| ≤ |q|² + |x|²` all of it is below
+/// `(2d + 4) u (|q|² + |x|²)` (for d < 2²⁰). Absolute errors that relative
+/// rounding does not cover, each at most f32's smallest normal λ:
+/// conversions of coordinates below the normal range (`2 √d λ (|q| +
+/// |x|)`), the norm, the products and the sums (`2d + 1`). Doubled as a
+/// margin.
+pub(crate) fn fused_err(d: usize, q_norm: f64, x_norm_max: f64) -> f64 {
+    let u = f64::from(f32::EPSILON) / 2.0;
+    let tiny = f64::from(f32::MIN_POSITIVE);
+    let df = d as f64;
+    2.0 * ((2.0 * df + 4.0) * u * (q_norm + x_norm_max)
+        + tiny * (2.0 * df.sqrt() * (q_norm.sqrt() + x_norm_max.sqrt()) + 2.0 * df + 1.0))
+}
+
+/// The fused search's products: the scores of [`GROUP`] queries (`c`:
+/// their coordinates times −2, query by query, `d` each) against every
+/// panel, written to `scores` (query by query, `norms.len()` each), and
+/// each query's smallest score. Sums run in coordinate order from the
+/// norm; with AVX2 or AVX-512 each product and sum is one fused
+/// multiply-add (one rounding instead of two: [`fused_err`] covers both).
+fn fused_scores(
+    panels: &[f32],
+    norms: &[f32],
+    d: usize,
+    c: &[f32],
+    scores: &mut [f32],
+) -> [f32; GROUP] {
+    #[cfg(target_arch = "x86_64")]
+    {
+        #[target_feature(enable = "avx512f,avx512bw,avx512vl,avx2,fma,bmi1,bmi2,popcnt,lzcnt")]
+        fn v4(
+            panels: &[f32],
+            norms: &[f32],
+            d: usize,
+            c: &[f32],
+            scores: &mut [f32],
+        ) -> [f32; GROUP] {
+            fused_scores_body::<true>(panels, norms, d, c, scores)
+        }
+        #[target_feature(enable = "avx2,fma,bmi1,bmi2,popcnt,lzcnt")]
+        fn v3(
+            panels: &[f32],
+            norms: &[f32],
+            d: usize,
+            c: &[f32],
+            scores: &mut [f32],
+        ) -> [f32; GROUP] {
+            fused_scores_body::<true>(panels, norms, d, c, scores)
+        }
+        if crate::cpu::has_v4() {
+            // SAFETY: the CPU has the features (runtime check).
+            return unsafe { v4(panels, norms, d, c, scores) };
+        }
+        if crate::cpu::has_v3() {
+            // SAFETY: as above.
+            return unsafe { v3(panels, norms, d, c, scores) };
+        }
+    }
+    fused_scores_body::<false>(panels, norms, d, c, scores)
+}
+
+/// [`fused_scores`] with (`FMA`) or without fused multiply-adds.
+#[inline(always)]
+pub(crate) fn fused_scores_body<const FMA: bool>(
+    panels: &[f32],
+    norms: &[f32],
+    d: usize,
+    c: &[f32],
+    scores: &mut [f32],
+) -> [f32; GROUP] {
+    const { assert!(GROUP == 4) };
+    let n = norms.len();
+    let mut lanes = [[f32::INFINITY; PANEL]; GROUP];
+    let (c0, c1, c2, c3) = (&c[..d], &c[d..2 * d], &c[2 * d..3 * d], &c[3 * d..4 * d]);
+    let madd = |a: f32, b: f32, acc: f32| if FMA { a.mul_add(b, acc) } else { acc + a * b };
+    for (p, (xp, np)) in panels
+        .chunks_exact(d * PANEL)
+        .zip(norms.chunks_exact(PANEL))
+        .enumerate()
+    {
+        let np: &[f32; PANEL] = np.try_into().expect("panel");
+        let (mut a0, mut a1, mut a2, mut a3) = (*np, *np, *np, *np);
+        for (j, x) in xp.chunks_exact(PANEL).enumerate() {
+            let x: &[f32; PANEL] = x.try_into().expect("panel");
+            let (k0, k1, k2, k3) = (c0[j], c1[j], c2[j], c3[j]);
+            for l in 0..PANEL {
+                a0[l] = madd(k0, x[l], a0[l]);
+                a1[l] = madd(k1, x[l], a1[l]);
+                a2[l] = madd(k2, x[l], a2[l]);
+                a3[l] = madd(k3, x[l], a3[l]);
+            }
+        }
+        for (g, (a, l)) in [a0, a1, a2, a3].iter().zip(lanes.iter_mut()).enumerate() {
+            scores[g * n + p * PANEL..g * n + (p + 1) * PANEL].copy_from_slice(a);
+            for (lv, &av) in l.iter_mut().zip(a) {
+                *lv = if av < *lv { av } else { *lv };
+            }
+        }
+    }
+    let mut best = [f32::INFINITY; GROUP];
+    for (b, l) in best.iter_mut().zip(&lanes) {
+        for &v in l {
+            *b = if v < *b { v } else { *b };
+        }
+    }
+    best
+}
+
+crate::cpu::dispatched! {
+    /// The nearest of the `nx` rows to `qi` given its fused scores `col`
+    /// (padded to whole panels) and the smallest of them: every row whose
+    /// score is within `band` of it is re-checked with a direct f64
+    /// distance (ties to the smallest index).
+    fn fused_pick(x_rows: &[f64], col: &[f32], nx: usize, best: f32, qi: &[f64], band: f64) -> usize {
+        let d = qi.len();
+        let limit = (f64::from(best) + band) as f32;
+        let limit = if limit.is_finite() { limit.next_up() } else { limit };
+        let mut arg = usize::MAX;
+        let mut best_d = f64::INFINITY;
+        for (p, cs) in col.chunks_exact(PANEL).enumerate() {
+            let mut any = false;
+            for &s in cs {
+                any |= s <= limit;
+            }
+            if any {
+                for (l, &s) in cs.iter().enumerate() {
+                    let k = p * PANEL + l;
+                    if k < nx
+                        && s <= limit
+                        && let Some(dist) = dist2_below(&x_rows[k * d..(k + 1) * d], qi, best_d)
+                        && dist < best_d
+                    {
+                        best_d = dist;
+                        arg = k;
+                    }
+                }
+            }
+        }
+        arg
+    }
 }

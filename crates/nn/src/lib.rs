@@ -5,7 +5,9 @@
 //! rigorous rounding band of the best one is re-checked with a direct f64
 //! distance, so the result is the true nearest row in f64 (ties: the
 //! smallest index). Memory is bounded by the block size, never
-//! n_queries x n_data.
+//! n_queries x n_data. In up to 32 dimensions brute force scores in one
+//! fused kernel instead (four queries against sixteen rows in registers,
+//! one multiply-add per coordinate, its own band: `fused_err`).
 //!
 //! In high dimensions most of that work can be skipped ([`NnStrategy::Prefix`]):
 //! spectral embeddings spread mostly along their leading (low-frequency)
@@ -170,7 +172,8 @@ pub enum NnStrategy {
     /// force otherwise.
     #[default]
     Auto,
-    /// Every query against every data row (blocked f32 GEMM).
+    /// Every query against every data row (blocked f32 GEMM; up to 32
+    /// dimensions a fused f32 kernel).
     Brute,
     /// Both sets split into clusters by principal-direction bisection;
     /// a cluster of queries is compared (f32 GEMM) only with the data

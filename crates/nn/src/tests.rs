@@ -2,7 +2,9 @@
 
 use nalgebra::DMatrix;
 
-use crate::brute::{brute_search, power_of_two_scale};
+use crate::brute::{
+    BruteData, GROUP, PANEL, brute_search, fused_err, fused_scores_body, power_of_two_scale,
+};
 use crate::prefix::{prefix_search, prefix_search_with};
 use crate::rows::{dist2, row_major};
 use crate::tree::tree_search;
@@ -68,8 +70,11 @@ fn naive(x: &DMatrix<f64>, q: &DMatrix<f64>) -> Vec<usize> {
 /// terms returns wrong rows in the first case.
 #[test]
 fn f32_bands_cover_underflow() {
-    let (nx, d) = (300, 40);
-    for (offset, spread) in [(0.0, 1e-30), (0.0, 1e-42), (1.0, 1e-40)] {
+    // d = 20: brute force runs the fused kernel; d = 40: the GEMMs.
+    for (nx, d, offset, spread) in [20, 40]
+        .into_iter()
+        .flat_map(|d| [(0.0, 1e-30), (0.0, 1e-42), (1.0, 1e-40)].map(|(o, s)| (300, d, o, s)))
+    {
         let x = DMatrix::from_fn(nx, d, |i, j| {
             offset + spread * (((i * 37 + j * 11) % 101) as f64 - 50.0)
         });
@@ -77,12 +82,12 @@ fn f32_bands_cover_underflow() {
             offset + spread * (((i * 53 + j * 7) % 97) as f64 - 48.5)
         });
         let want = naive(&x, &q);
-        assert_eq!(brute_search(&x, &q), want, "brute {offset} {spread}");
-        assert_eq!(tree_search(&x, &q), want, "tree {offset} {spread}");
+        assert_eq!(brute_search(&x, &q), want, "brute {d} {offset} {spread}");
+        assert_eq!(tree_search(&x, &q), want, "tree {d} {offset} {spread}");
         assert_eq!(
             prefix_search(&x, &q, None),
             want,
-            "prefix {offset} {spread}"
+            "prefix {d} {offset} {spread}"
         );
     }
 }
@@ -124,4 +129,64 @@ fn every_strategy_exact_at_extreme_scales() {
     }
     let s = power_of_two_scale(&DMatrix::from_element(2, 2, 5e-320), &zero).unwrap();
     assert!((1e-20..1e-15).contains(&(5e-320 * s)), "{}", 5e-320 * s);
+}
+
+/// Every score of the fused kernel, with and without fused multiply-adds
+/// (whatever the CPU: the variant with them is called here without the
+/// target features, through the library's exact `mul_add`), is within
+/// the bound [`fused_err`] derives (without its doubling) of the exact
+/// score `|x|² − 2 q·x`, at ordinary scales and where coordinates and
+/// products fall below f32's normal range.
+#[test]
+fn fused_scores_are_within_their_bound() {
+    for (d, scale) in [
+        (1, 1.0),
+        (3, 1.0),
+        (17, 1.0),
+        (32, 3e5),
+        (32, 1e-21),
+        (9, 1e-40),
+    ] {
+        let (nx, nq) = (37, 4);
+        let x = DMatrix::from_fn(nx, d, |i, j| {
+            scale * (((i * 37 + j * 11) % 101) as f64 / 50.0 - 1.0 + (i as f64).sin() * 1e-3)
+        });
+        let q = DMatrix::from_fn(nq, d, |i, j| {
+            scale * (((i * 53 + j * 7) % 97) as f64 / 48.0 - 1.0 + (j as f64).cos() * 1e-3)
+        });
+        let data = BruteData::new(&x);
+        let np = nx.div_ceil(PANEL);
+        let mut c = vec![0.0f32; GROUP * d];
+        for g in 0..nq {
+            for j in 0..d {
+                c[g * d + j] = -2.0 * (q[(g, j)] as f32);
+            }
+        }
+        let x_norm_max = (0..nx).map(|r| x.row(r).norm_squared()).fold(0.0, f64::max);
+        for fma in [false, true] {
+            let mut scores = vec![0.0f32; GROUP * np * PANEL];
+            let best = if fma {
+                fused_scores_body::<true>(&data.panels, &data.panel_norms, d, &c, &mut scores)
+            } else {
+                fused_scores_body::<false>(&data.panels, &data.panel_norms, d, &c, &mut scores)
+            };
+            for g in 0..nq {
+                let q_norm = q.row(g).norm_squared();
+                let bound = fused_err(d, q_norm, x_norm_max) / 2.0;
+                let col = &scores[g * np * PANEL..(g + 1) * np * PANEL];
+                for r in 0..nx {
+                    let exact = x.row(r).norm_squared() - 2.0 * x.row(r).dot(&q.row(g));
+                    let err = (f64::from(col[r]) - exact).abs();
+                    assert!(
+                        err <= bound,
+                        "d {d} scale {scale:e} fma {fma}: {err:e} > {bound:e}"
+                    );
+                }
+                // The padding never scores, and the best is the smallest.
+                assert!(col[nx..].iter().all(|s| *s == f32::INFINITY));
+                let min = col.iter().fold(f32::INFINITY, |a, &b| a.min(b));
+                assert_eq!(best[g], min);
+            }
+        }
+    }
 }
