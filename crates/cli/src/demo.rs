@@ -9,8 +9,6 @@ use std::time::Instant;
 use fmaps::eval::{EvalParams, GroundTruth, MapReport, evaluate};
 use fmaps::geodesic::ExactSolver;
 use fmaps::mesh_io::TriMesh;
-use fmaps::mesh_io::body::{Body, mirrored, nearest_vertices};
-use fmaps::mesh_io::generate::creature_pair;
 use fmaps::pipeline::{MatchParams, MatchResult, Refinement, match_prepared, prepare};
 use fmaps::viz::{self, View, plot};
 use serde_json::{Value, json};
@@ -48,7 +46,7 @@ pub(crate) fn run(out_dir: &Path, subdivisions: u32, as_json: bool) -> Result<()
     }
     let t0 = Instant::now();
     let spinner = crate::Spinner::new("generating the built-in pairs");
-    let cases = [creature_case(subdivisions)?, body_case()?];
+    let cases = cases(subdivisions)?;
     let params = MatchParams {
         refine: Refinement::recommended(),
         ..MatchParams::default()
@@ -147,48 +145,23 @@ pub(crate) fn run(out_dir: &Path, subdivisions: u32, as_json: bool) -> Result<()
     emit(&o)
 }
 
-/// The creature at rest and walking (the target renumbered and moved);
-/// vertex i of A is vertex `truth[i]` of B.
-fn creature_case(subdivisions: u32) -> Result<Case, Failure> {
-    let pair = creature_pair(subdivisions);
-    let n = pair.source.n_vertices();
-    Ok(Case {
-        title: "creature, rest -> walking (near-isometric)".into(),
-        prefix: "",
-        truth: GroundTruth::new((0..n).collect(), pair.truth.clone(), None).map_err(runtime)?,
-        rows: (0..n).collect(),
-        a: pair.source,
-        b: pair.target,
-    })
-}
-
-/// Two individuals of the generated body collection, walking and
-/// reaching (`body_0_1 -> body_5_3` of `cargo xtask eval --collection
-/// generated-noniso`): limbs, girths and torso of different proportions,
-/// independent meshes, ground truth through the template.
-fn body_case() -> Result<Case, Failure> {
-    let body = Body::template();
-    let (sa, sb) = (
-        body.collection_shape(0, 1).map_err(runtime)?,
-        body.collection_shape(5, 3).map_err(runtime)?,
-    );
-    let points = body.truth_points().map_err(runtime)?;
-    let mirror: Vec<[f64; 3]> = points.iter().map(|&p| mirrored(p)).collect();
-    let rows = nearest_vertices(&points, &sa.rest);
-    let truth = GroundTruth::new(
-        rows.clone(),
-        nearest_vertices(&points, &sb.rest),
-        Some(nearest_vertices(&mirror, &sb.rest)),
-    )
-    .map_err(runtime)?;
-    Ok(Case {
-        title: "two different bodies, walking -> reaching (non-isometric)".into(),
-        prefix: "noniso-",
-        a: sa.mesh,
-        b: sb.mesh,
-        truth,
-        rows,
-    })
+/// The library's built-in pairs as cases (the non-isometric one's
+/// pictures prefixed `noniso-`; errors drawn on A's ground-truth rows).
+fn cases(subdivisions: u32) -> Result<Vec<Case>, Failure> {
+    let pairs = fmaps::demo::demo_pairs(subdivisions).map_err(|e| runtime(anyhow::anyhow!(e)))?;
+    pairs
+        .into_iter()
+        .map(|p| {
+            Ok(Case {
+                truth: p.truth().map_err(runtime)?,
+                rows: p.gt_a,
+                prefix: if p.name == "bodies" { "noniso-" } else { "" },
+                title: p.title,
+                a: p.a,
+                b: p.b,
+            })
+        })
+        .collect()
 }
 
 fn run_case(case: &Case, params: &MatchParams) -> Result<Outcome, Failure> {

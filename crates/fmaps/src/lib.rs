@@ -33,6 +33,7 @@
 #![deny(missing_docs)]
 #![forbid(unsafe_code)]
 
+pub mod demo;
 pub mod npy;
 pub mod pictures;
 pub mod pipeline;
