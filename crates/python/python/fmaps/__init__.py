@@ -1,0 +1,40 @@
+"""fmaps: non-rigid 3D shape matching with functional maps, in Rust.
+
+Two surfaces in, a correspondence out::
+
+    import fmaps
+    a = fmaps.Mesh.load("tr_reg_080.off")
+    b = fmaps.Mesh.load("tr_reg_081.off")
+    r = fmaps.match_shapes(a, b)          # the pipeline of `fmaps match`
+    r.map_ab                              # for each vertex of A, a vertex of B
+
+Directions are explicit: ``map_ab[i]`` is the vertex of B that vertex ``i``
+of A goes to (0-based); ``c_ba`` maps coefficients on B to coefficients
+on A. Long calls release the GIL and run on ``threads`` threads (default:
+one per core). Errors raise :class:`FmapsError` (a ``ValueError``) with
+the message the ``fmaps`` command prints.
+"""
+
+from ._fmaps import (
+    FmapsError,
+    MatchResult,
+    Mesh,
+    __version__,
+    demo_pairs,
+    evaluate,
+    match_shapes,
+    read_indices,
+    spectrum,
+)
+
+__all__ = [
+    "FmapsError",
+    "MatchResult",
+    "Mesh",
+    "__version__",
+    "demo_pairs",
+    "evaluate",
+    "match_shapes",
+    "read_indices",
+    "spectrum",
+]

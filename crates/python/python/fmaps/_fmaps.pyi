@@ -1,0 +1,87 @@
+"""Type stubs of the extension module (see the package docstring)."""
+
+from os import PathLike
+from typing import Optional, Tuple, Union
+
+import numpy as np
+import numpy.typing as npt
+
+__version__: str
+
+class FmapsError(ValueError):
+    """Bad input or a failed computation; the message is the one `fmaps` prints."""
+
+class Mesh:
+    """A triangle mesh, validated on construction."""
+
+    def __init__(self, vertices: npt.ArrayLike, faces: npt.ArrayLike) -> None:
+        """`vertices`: n x 3 float64; `faces`: m x 3 integers, 0-based."""
+    @staticmethod
+    def load(path: Union[str, PathLike]) -> "Mesh":
+        """Reads an OFF, OBJ or PLY file (errors name the file and line)."""
+    @property
+    def vertices(self) -> npt.NDArray[np.float64]: ...
+    @property
+    def faces(self) -> npt.NDArray[np.int64]: ...
+    @property
+    def n_vertices(self) -> int: ...
+    @property
+    def n_faces(self) -> int: ...
+    def area(self) -> float: ...
+
+class MatchResult:
+    """The result of :func:`match_shapes`."""
+
+    map_ab: npt.NDArray[np.int64]
+    """For each vertex of A, the vertex of B it goes to (0-based)."""
+    map_ab_init: npt.NDArray[np.int64]
+    """The initial map, before refinement."""
+    c_ba: npt.NDArray[np.float64]
+    """Coefficients on B to coefficients on A."""
+    orientation: float
+    """Orientation score of `map_ab` (near 1 preserved, near -1 mirrored)."""
+    times: dict
+    """Seconds per stage (spectra, descriptors, operators, solve, point_map, refine, total)."""
+    quality: dict
+    """Scores without ground truth (coverage, area_coverage, collapsed_faces, area_distortion, conformal_distortion)."""
+    refiner: str
+    """The refiner's name ("" without refinement)."""
+    seconds_per_iteration: list
+    """Seconds of each refinement step."""
+
+def spectrum(
+    mesh: Mesh, k: int = 200, threads: Optional[int] = None
+) -> Tuple[npt.NDArray[np.float64], npt.NDArray[np.float64], npt.NDArray[np.float64]]:
+    """(eigenvalues (k,), basis (n x k), lumped mass (n,)) of the mesh as given."""
+
+def match_shapes(
+    a: Mesh,
+    b: Mesh,
+    *,
+    refine: str = "default",
+    k: int = 50,
+    k_process: int = 200,
+    w_orient: Optional[float] = None,
+    mirrored: bool = False,
+    area_normalize: bool = True,
+    threads: Optional[int] = None,
+) -> MatchResult:
+    """The pipeline of `fmaps match`; refine: "default" (Smooth Shells), "smooth-shells", "zoomout", "icp", "none"."""
+
+def evaluate(
+    a: Mesh,
+    b: Mesh,
+    map_ab: npt.ArrayLike,
+    gt_a: npt.ArrayLike,
+    gt_b: npt.ArrayLike,
+    gt_b_sym: Optional[npt.ArrayLike] = None,
+    geodesic: str = "exact",
+    threads: Optional[int] = None,
+) -> dict:
+    """Geodesic errors of `map_ab` against ground truth, as `fmaps eval`."""
+
+def read_indices(path: Union[str, PathLike]) -> npt.NDArray[np.int64]:
+    """A .vts ground-truth or .map file, 0-based."""
+
+def demo_pairs(subdivisions: int = 4) -> list:
+    """The built-in pairs of `fmaps demo`: dicts with name, title, a, b, gt_a, gt_b, gt_b_sym."""

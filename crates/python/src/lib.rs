@@ -1,0 +1,519 @@
+//! Python bindings of fmaps: the extension module `fmaps._fmaps` of the
+//! `fmaps` wheel (built by maturin from `pyproject.toml`; the package's
+//! Python part, type stubs and tests live beside it in `python/` and
+//! `tests/`).
+//!
+//! What Python sees: `Mesh` (load OFF/OBJ/PLY, or from numpy arrays,
+//! validated), `spectrum` (eigenvalues, basis, mass), `match_shapes` (the
+//! pipeline of `fmaps match`, same defaults, same maps), `evaluate` (the
+//! benchmark protocol: geodesic errors against ground truth),
+//! the scores without ground truth of each result, the correspondence
+//! file reader and the built-in pairs of `fmaps demo`. Maps are named by direction: `map_ab[i]` is the vertex
+//! of B that vertex `i` of A goes to, 0-based. Long calls release the GIL
+//! and run on `threads` threads (all cores by default). Errors raise
+//! `fmaps.FmapsError` (a `ValueError`) with the CLI's message.
+//!
+//! Arrays come out without copies: Rust's vectors and column-major
+//! matrices become numpy arrays (C- or Fortran-ordered) that own them.
+//! Meshes are copied in (a mesh owns its vertices and faces).
+#![deny(unsafe_code)]
+
+use std::path::PathBuf;
+use std::sync::Arc;
+
+use fmaps::mesh_io::TriMesh;
+use fmaps::pipeline::{MatchParams, Refinement};
+use nalgebra::DMatrix;
+use numpy::ndarray::{Array1, Array2, ShapeBuilder};
+use numpy::{IntoPyArray, PyArray1, PyArray2, PyReadonlyArray1, PyReadonlyArray2};
+use pyo3::exceptions::PyValueError;
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+
+pyo3::create_exception!(
+    _fmaps,
+    FmapsError,
+    PyValueError,
+    "Bad input or a failed computation; the message is the one `fmaps` prints."
+);
+
+/// The error of a fmaps call, with its causes (as the CLI prints them).
+fn err(e: impl std::fmt::Display) -> PyErr {
+    FmapsError::new_err(e.to_string())
+}
+
+/// The error about a file: its path first, as the CLI names it.
+fn err_on(path: &std::path::Path) -> impl Fn(fmaps::mesh_io::Error) -> PyErr + '_ {
+    move |e| FmapsError::new_err(format!("{}: {e}", path.display()))
+}
+
+/// Runs `f` without the GIL on a pool of `threads` threads (`None` or 0:
+/// one per core).
+fn run<T: Send>(
+    py: Python<'_>,
+    threads: Option<usize>,
+    f: impl FnOnce() -> T + Send,
+) -> PyResult<T> {
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(threads.unwrap_or(0))
+        .build()
+        .map_err(|e| err(format!("threads = {threads:?}: {e}")))?;
+    Ok(py.detach(|| pool.install(f)))
+}
+
+/// A triangle mesh: vertex positions and oriented triangles (0-based),
+/// validated on construction (finite coordinates, indices in range, no
+/// repeated vertex in a triangle).
+#[pyclass(module = "fmaps._fmaps", frozen)]
+struct Mesh {
+    inner: Arc<TriMesh>,
+}
+
+#[pymethods]
+impl Mesh {
+    /// A mesh from `vertices` (n x 3 float64) and `faces` (m x 3
+    /// integers, 0-based).
+    #[new]
+    fn new(
+        vertices: PyReadonlyArray2<'_, f64>,
+        faces: PyReadonlyArray2<'_, i64>,
+    ) -> PyResult<Self> {
+        let v = vertices.as_array();
+        let f = faces.as_array();
+        if v.ncols() != 3 || f.ncols() != 3 {
+            return Err(err(format!(
+                "vertices must be n x 3 and faces m x 3, got {:?} and {:?}",
+                v.shape(),
+                f.shape()
+            )));
+        }
+        let verts: Vec<[f64; 3]> = v.rows().into_iter().map(|r| [r[0], r[1], r[2]]).collect();
+        let mut tris = Vec::with_capacity(f.nrows());
+        for (i, r) in f.rows().into_iter().enumerate() {
+            let mut t = [0usize; 3];
+            for (d, &x) in r.iter().enumerate() {
+                t[d] = usize::try_from(x)
+                    .map_err(|_| err(format!("face {i}: negative vertex index {x}")))?;
+            }
+            tris.push(t);
+        }
+        let mesh = TriMesh::new(verts, tris).map_err(err)?;
+        Ok(Mesh {
+            inner: Arc::new(mesh),
+        })
+    }
+
+    /// Reads an OFF, OBJ or PLY file (errors name the file and line).
+    #[staticmethod]
+    fn load(path: PathBuf) -> PyResult<Self> {
+        let mesh = fmaps::mesh_io::read_mesh(&path).map_err(err_on(&path))?;
+        Ok(Mesh {
+            inner: Arc::new(mesh),
+        })
+    }
+
+    /// Vertex positions (n x 3 float64, a copy).
+    #[getter]
+    fn vertices<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> {
+        let v = self.inner.vertices();
+        let flat: Vec<f64> = v.iter().flatten().copied().collect();
+        Array2::from_shape_vec((v.len(), 3), flat)
+            .expect("n x 3")
+            .into_pyarray(py)
+    }
+
+    /// Triangles (m x 3 int64, 0-based, a copy).
+    #[getter]
+    fn faces<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<i64>> {
+        let f = self.inner.faces();
+        let flat: Vec<i64> = f.iter().flatten().map(|&i| i as i64).collect();
+        Array2::from_shape_vec((f.len(), 3), flat)
+            .expect("m x 3")
+            .into_pyarray(py)
+    }
+
+    /// Number of vertices.
+    #[getter]
+    fn n_vertices(&self) -> usize {
+        self.inner.n_vertices()
+    }
+
+    /// Number of triangles.
+    #[getter]
+    fn n_faces(&self) -> usize {
+        self.inner.faces().len()
+    }
+
+    /// Total surface area.
+    fn area(&self) -> f64 {
+        self.inner.area()
+    }
+
+    fn __repr__(&self) -> String {
+        format!(
+            "Mesh({} vertices, {} faces)",
+            self.inner.n_vertices(),
+            self.inner.faces().len()
+        )
+    }
+}
+
+/// The first `k` Laplace–Beltrami eigenpairs of `mesh` as given (cotangent
+/// Laplacian, lumped mass): `(eigenvalues (k,), basis (n x k, Fortran
+/// order, orthonormal in the mass), mass (n,))`.
+#[pyfunction]
+#[pyo3(signature = (mesh, k = 200, threads = None))]
+#[allow(clippy::type_complexity)]
+fn spectrum<'py>(
+    py: Python<'py>,
+    mesh: &Mesh,
+    k: usize,
+    threads: Option<usize>,
+) -> PyResult<(
+    Bound<'py, PyArray1<f64>>,
+    Bound<'py, PyArray2<f64>>,
+    Bound<'py, PyArray1<f64>>,
+)> {
+    let m = Arc::clone(&mesh.inner);
+    let params = fmaps::SpectrumParams {
+        threads: threads.unwrap_or(0),
+        ..Default::default()
+    };
+    let out = run(py, threads, move || fmaps::spectrum(&m, k, &params))?.map_err(err)?;
+    let basis = out.basis;
+    Ok((
+        basis.eigenvalues.as_slice().to_vec().into_pyarray(py),
+        fortran(basis.eigenvectors).into_pyarray(py),
+        basis.mass.as_slice().to_vec().into_pyarray(py),
+    ))
+}
+
+/// A column-major matrix as a Fortran-ordered array (no copy).
+fn fortran(m: DMatrix<f64>) -> Array2<f64> {
+    let (r, c) = m.shape();
+    Array2::from_shape_vec((r, c).f(), m.data.into()).expect("r x c")
+}
+
+/// The pipeline's parameters for `refine` (the names of `fmaps match
+/// --refine`, or "default": Smooth Shells where both meshes have enough
+/// vertices for its basis, else none, as `fmaps match` without flags).
+fn params_for(
+    refine: &str,
+    smallest: usize,
+    k: usize,
+    k_process: usize,
+    w_orient: Option<f64>,
+    mirrored: bool,
+    area_normalize: bool,
+) -> PyResult<MatchParams> {
+    let mut p = MatchParams {
+        k,
+        k_process,
+        k_descr: MatchParams::default().k_descr.min(k_process),
+        orient_reversing: mirrored,
+        area_normalize,
+        ..MatchParams::default()
+    };
+    if let Some(w) = w_orient {
+        p.w_orient = w;
+    }
+    let shells = || {
+        Refinement::Custom(Arc::new(fmaps::refine::SmoothShells {
+            reflect: mirrored,
+            ..Default::default()
+        }))
+    };
+    p.refine = match refine {
+        "default" if smallest > Refinement::recommended().k_needed() => shells(),
+        "default" | "none" => Refinement::None,
+        "smooth-shells" => shells(),
+        "icp" => Refinement::Icp(fmaps::refine::Icp::default()),
+        "zoomout" => {
+            let z = Refinement::default_zoomout();
+            let most = k_process.max(z.k_needed());
+            p.starts = fmaps::pipeline::ZOOMOUT_STARTS
+                .into_iter()
+                .filter(|&s| s <= most)
+                .collect();
+            z
+        }
+        other => {
+            return Err(err(format!(
+                "refine = {other:?}: expected \"default\", \"smooth-shells\", \"zoomout\", \"icp\" or \"none\""
+            )));
+        }
+    };
+    Ok(p)
+}
+
+/// The result of [`match_shapes`].
+#[pyclass(module = "fmaps._fmaps", frozen, get_all)]
+struct MatchResult {
+    /// For each vertex of A, the vertex of B it goes to (int64, 0-based).
+    map_ab: Py<PyArray1<i64>>,
+    /// The initial map (before refinement), same convention.
+    map_ab_init: Py<PyArray1<i64>>,
+    /// `C_BA`: coefficients on B to coefficients on A (Fortran order).
+    c_ba: Py<PyArray2<f64>>,
+    /// Orientation score of `map_ab` (near 1 preserved, near −1 mirrored).
+    orientation: f64,
+    /// Seconds per stage: spectra, descriptors, operators, solve,
+    /// point_map, refine, total.
+    times: Py<PyDict>,
+    /// Scores of `map_ab` without ground truth (coverage, area_coverage,
+    /// collapsed_faces, area_distortion, conformal_distortion).
+    quality: Py<PyDict>,
+    /// The refiner's name ("" without refinement).
+    refiner: String,
+    /// Seconds of each refinement step (Smooth Shells: rigid alignment,
+    /// initialisation, then its levels).
+    seconds_per_iteration: Vec<f64>,
+}
+
+#[pymethods]
+impl MatchResult {
+    fn __repr__(&self) -> String {
+        format!(
+            "MatchResult(refiner={:?}, orientation={:.3})",
+            self.refiner, self.orientation
+        )
+    }
+}
+
+fn indices(py: Python<'_>, v: &[usize]) -> Py<PyArray1<i64>> {
+    v.iter()
+        .map(|&i| i as i64)
+        .collect::<Vec<_>>()
+        .into_pyarray(py)
+        .unbind()
+}
+
+/// Matches `a` to `b` with the pipeline of `fmaps match` (the same
+/// defaults and the same maps for the same options, on any number of
+/// threads).
+#[pyfunction]
+#[pyo3(signature = (a, b, *, refine = "default", k = 50, k_process = 200, w_orient = None, mirrored = false, area_normalize = true, threads = None))]
+#[allow(clippy::too_many_arguments)]
+fn match_shapes(
+    py: Python<'_>,
+    a: &Mesh,
+    b: &Mesh,
+    refine: &str,
+    k: usize,
+    k_process: usize,
+    w_orient: Option<f64>,
+    mirrored: bool,
+    area_normalize: bool,
+    threads: Option<usize>,
+) -> PyResult<MatchResult> {
+    let (ma, mb) = (Arc::clone(&a.inner), Arc::clone(&b.inner));
+    let smallest = ma.n_vertices().min(mb.n_vertices());
+    let params = params_for(
+        refine,
+        smallest,
+        k,
+        k_process,
+        w_orient,
+        mirrored,
+        area_normalize,
+    )?;
+    let (r, quality) = run(py, threads, move || {
+        let r = fmaps::match_shapes(&ma, &mb, &params).map_err(|e| e.to_string())?;
+        let q = fmaps::eval::map_quality(&r.t_ab, &ma, &mb, None).map_err(|e| e.to_string())?;
+        Ok::<_, String>((r, q))
+    })?
+    .map_err(err)?;
+    let times = PyDict::new(py);
+    let t = r.times;
+    for (name, v) in [
+        ("spectra", t.spectra),
+        ("descriptors", t.descriptors),
+        ("operators", t.operators),
+        ("solve", t.solve),
+        ("point_map", t.point_map),
+        ("refine", t.refine),
+        ("total", t.total),
+    ] {
+        times.set_item(name, v)?;
+    }
+    let q = PyDict::new(py);
+    q.set_item("coverage", quality.coverage)?;
+    q.set_item("area_coverage", quality.area_coverage)?;
+    q.set_item("collapsed_faces", quality.collapsed_faces)?;
+    q.set_item("area_distortion", quality.area_distortion)?;
+    q.set_item("conformal_distortion", quality.conformal_distortion)?;
+    let (refiner, seconds_per_iteration) = match &r.refine {
+        Some(rep) => (
+            rep.method.clone(),
+            rep.iterations.iter().map(|i| i.seconds).collect(),
+        ),
+        None => (String::new(), Vec::new()),
+    };
+    Ok(MatchResult {
+        map_ab: indices(py, &r.t_ab),
+        map_ab_init: indices(py, &r.t_ab_init),
+        c_ba: fortran(r.c_ba).into_pyarray(py).unbind(),
+        orientation: r.orientation,
+        times: times.unbind(),
+        quality: q.unbind(),
+        refiner,
+        seconds_per_iteration,
+    })
+}
+
+/// Indices from Python (non-negative), checked against `n` vertices of
+/// `what`.
+fn checked(v: &PyReadonlyArray1<'_, i64>, n: usize, what: &str) -> PyResult<Vec<usize>> {
+    v.as_array()
+        .iter()
+        .enumerate()
+        .map(|(i, &x)| match usize::try_from(x) {
+            Ok(u) if u < n => Ok(u),
+            _ => Err(err(format!(
+                "{what}: entry {i} is {x}, outside 0..{n} (0-based vertex indices)"
+            ))),
+        })
+        .collect()
+}
+
+/// Geodesic errors of `map_ab` against ground truth, as `fmaps eval`
+/// (normalised by √area(B)): `gt_a[i]` of A corresponds to `gt_b[i]` of B
+/// (and to `gt_b_sym[i]` under the symmetry). Returns a dict: mean_error,
+/// sym_mean_error, auc, coverage, errors (numpy), thresholds, curve.
+#[pyfunction]
+#[pyo3(signature = (a, b, map_ab, gt_a, gt_b, gt_b_sym = None, geodesic = "exact", threads = None))]
+#[allow(clippy::too_many_arguments)]
+fn evaluate<'py>(
+    py: Python<'py>,
+    a: &Mesh,
+    b: &Mesh,
+    map_ab: PyReadonlyArray1<'_, i64>,
+    gt_a: PyReadonlyArray1<'_, i64>,
+    gt_b: PyReadonlyArray1<'_, i64>,
+    gt_b_sym: Option<PyReadonlyArray1<'_, i64>>,
+    geodesic: &str,
+    threads: Option<usize>,
+) -> PyResult<Bound<'py, PyDict>> {
+    use fmaps::geodesic::{DijkstraSolver, DistanceSolver, ExactSolver, HeatParams, HeatSolver};
+    let (na, nb) = (a.inner.n_vertices(), b.inner.n_vertices());
+    if map_ab.len()? != na {
+        return Err(err(format!(
+            "map_ab has {} entries, A has {na} vertices",
+            map_ab.len()?
+        )));
+    }
+    let t_ab = checked(&map_ab, nb, "map_ab")?;
+    let gt = fmaps::eval::GroundTruth::new(
+        checked(&gt_a, na, "gt_a")?,
+        checked(&gt_b, nb, "gt_b")?,
+        gt_b_sym
+            .as_ref()
+            .map(|s| checked(s, nb, "gt_b_sym"))
+            .transpose()?,
+    )
+    .map_err(err)?;
+    let mb = Arc::clone(&b.inner);
+    let method = geodesic.to_string();
+    let report = run(py, threads, move || {
+        let solver: Box<dyn DistanceSolver> = match method.as_str() {
+            "exact" => Box::new(ExactSolver::new(&mb).map_err(|e| e.to_string())?),
+            "heat" => {
+                Box::new(HeatSolver::new(&mb, &HeatParams::default()).map_err(|e| e.to_string())?)
+            }
+            "dijkstra" => Box::new(DijkstraSolver::new(&mb)),
+            other => {
+                return Err(format!(
+                    "geodesic = {other:?}: expected \"exact\", \"heat\" or \"dijkstra\""
+                ));
+            }
+        };
+        fmaps::eval::evaluate(
+            &mb,
+            solver.as_ref(),
+            &t_ab,
+            &gt,
+            None,
+            &fmaps::eval::EvalParams::default(),
+        )
+        .map_err(|e| e.to_string())
+    })?
+    .map_err(err)?;
+    let d = PyDict::new(py);
+    d.set_item("mean_error", report.mean_error)?;
+    d.set_item("sym_mean_error", report.sym_mean_error)?;
+    d.set_item("auc", report.auc)?;
+    d.set_item("coverage", report.coverage)?;
+    d.set_item("geodesic", report.geodesic)?;
+    d.set_item("errors", Array1::from(report.errors).into_pyarray(py))?;
+    d.set_item("thresholds", report.thresholds.into_pyarray(py))?;
+    d.set_item("curve", report.curve.into_pyarray(py))?;
+    Ok(d)
+}
+
+/// Reads a `.vts` ground-truth file (or a `.map` file): 0-based int64.
+#[pyfunction]
+fn read_indices<'py>(py: Python<'py>, path: PathBuf) -> PyResult<Bound<'py, PyArray1<i64>>> {
+    let is_map = path.extension().is_some_and(|e| e == "map");
+    let v = if is_map {
+        fmaps::mesh_io::read_map(&path)
+    } else {
+        fmaps::mesh_io::read_vts(&path)
+    }
+    .map_err(err_on(&path))?;
+    Ok(indices(py, &v).into_bound(py))
+}
+
+/// The built-in pairs of `fmaps demo` (generated, exact ground truth):
+/// a list of dicts with name, title, a, b (meshes), gt_a, gt_b and
+/// gt_b_sym (None for the asymmetric creature).
+#[pyfunction]
+#[pyo3(signature = (subdivisions = 4))]
+fn demo_pairs(py: Python<'_>, subdivisions: u32) -> PyResult<Vec<Bound<'_, PyDict>>> {
+    if !(3..=6).contains(&subdivisions) {
+        return Err(err(format!(
+            "subdivisions = {subdivisions}: use 3..=6 (3 = 642 vertices, 4 = 2,562, 5 = 10,242)"
+        )));
+    }
+    let pairs = py
+        .detach(|| fmaps::demo::demo_pairs(subdivisions))
+        .map_err(err)?;
+    pairs
+        .into_iter()
+        .map(|p| {
+            let d = PyDict::new(py);
+            d.set_item("name", p.name)?;
+            d.set_item("title", &p.title)?;
+            d.set_item("gt_a", indices(py, &p.gt_a))?;
+            d.set_item("gt_b", indices(py, &p.gt_b))?;
+            d.set_item("gt_b_sym", p.gt_b_sym.as_deref().map(|s| indices(py, s)))?;
+            d.set_item(
+                "a",
+                Mesh {
+                    inner: Arc::new(p.a),
+                },
+            )?;
+            d.set_item(
+                "b",
+                Mesh {
+                    inner: Arc::new(p.b),
+                },
+            )?;
+            Ok(d)
+        })
+        .collect()
+}
+
+/// The extension module.
+#[pymodule]
+fn _fmaps(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add("FmapsError", m.py().get_type::<FmapsError>())?;
+    m.add_class::<Mesh>()?;
+    m.add_class::<MatchResult>()?;
+    m.add_function(wrap_pyfunction!(spectrum, m)?)?;
+    m.add_function(wrap_pyfunction!(match_shapes, m)?)?;
+    m.add_function(wrap_pyfunction!(evaluate, m)?)?;
+    m.add_function(wrap_pyfunction!(read_indices, m)?)?;
+    m.add_function(wrap_pyfunction!(demo_pairs, m)?)?;
+    m.add("__version__", env!("CARGO_PKG_VERSION"))?;
+    Ok(())
+}
