@@ -12,6 +12,7 @@ use fmaps::mesh_io::{self, TriMesh};
 use fmaps::{Backend, SpectrumParams};
 use serde_json::json;
 
+mod batch;
 mod demo;
 mod eval;
 mod geodesic;
@@ -77,6 +78,17 @@ Defaults are the literature's automatic pipeline (pyFM's): 200 eigenpairs, 100 W
 a 50 x 50 map, weights descr 0.1, lap 1e-3 (resolvent mask), dcomm 1, orientation 1."
     )]
     Match(MatchArgs),
+    /// Match the pairs of a collection: resumable (finished pairs are
+    /// skipped), each shape's eigenbasis computed once and cached on disk,
+    /// optionally one shard of a job array; one JSON line per pair.
+    #[command(after_help = "Examples:\n  \
+fmaps batch test_pairs.txt --data FAUST/vtx_5k --out faust-maps --corres FAUST/vtx_5k/corres\n  \
+fmaps batch pairs.txt --data meshes --out maps --shard $SLURM_ARRAY_TASK_ID/16 -- --refine zoomout\n  \
+parallel fmaps --threads 1 batch pairs.txt --data meshes --out maps --shard {}/8 ::: $(seq 8)\n\n\
+Writes A_B.map (1-based, as fmaps match --out) and A_B.json per pair, report.jsonl (every\n\
+finished pair of the file, in order) and bases/ (the eigenbasis cache, keyed by the mesh\n\
+file's content and the parameters). Run it again to resume after a kill.")]
+    Batch(batch::BatchArgs),
     /// Refine a point map from elsewhere (another tool, a learned method,
     /// a published benchmark map) with ICP or ZoomOut.
     #[command(after_help = "Examples:\n  \
@@ -318,6 +330,7 @@ fn main() -> ExitCode {
         } => demo::run(&out, subdivisions, json),
         Command::Info { mesh, json } => info(&mesh, json),
         Command::Match(args) => match_cmd(&args),
+        Command::Batch(args) => batch::batch(&args),
         Command::Refine(args) => refine_cmd::refine_cmd(&args),
         Command::Geodesic {
             mesh,

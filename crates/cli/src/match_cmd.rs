@@ -20,7 +20,7 @@ pub(crate) struct MatchArgs {
     /// Output map T: A -> B, one 1-based B vertex per A vertex (the
     /// dataset's .map format).
     #[arg(long)]
-    out: Option<PathBuf>,
+    pub(crate) out: Option<PathBuf>,
     /// Size of the functional map (k x k).
     #[arg(long, short = 'k', default_value_t = defaults().k)]
     k: usize,
@@ -99,10 +99,10 @@ pub(crate) struct MatchArgs {
     /// Write C_BA (k x k, functions on B to functions on A, between the
     /// bases of the unit-area shapes unless --no-area-normalize) as text.
     #[arg(long)]
-    save_fmap: Option<PathBuf>,
+    pub(crate) save_fmap: Option<PathBuf>,
     /// Print one JSON object (stage times, map metrics, energy).
     #[arg(long)]
-    json: bool,
+    pub(crate) json: bool,
 }
 
 #[derive(Clone, Copy, PartialEq, Eq, ValueEnum)]

@@ -673,3 +673,115 @@ fn refine_repairs_a_given_map() {
     }
     std::fs::remove_dir_all(&dir).ok();
 }
+
+#[test]
+fn batch_matches_every_pair_once_resumes_and_shards() {
+    let dir = tmpdir("batch");
+    let s = |p: &std::path::Path| p.to_str().unwrap().to_string();
+    // Three shapes: the creature, its bent copy, and the copy scaled.
+    let pair = fmaps::mesh_io::generate::creature_pair(3);
+    let data = dir.join("data");
+    std::fs::create_dir_all(&data).unwrap();
+    fmaps::mesh_io::write_mesh(data.join("rest.off"), &pair.source).unwrap();
+    fmaps::mesh_io::write_mesh(data.join("walk.ply"), &pair.target).unwrap();
+    fmaps::mesh_io::write_mesh(data.join("big.obj"), &pair.target.scaled(3.0).unwrap()).unwrap();
+    let pairs = dir.join("pairs.txt");
+    std::fs::write(&pairs, "# name name\nrest walk\n\nwalk big\nrest big\n").unwrap();
+    let opts = [
+        "--",
+        "--refine",
+        "none",
+        "--k",
+        "12",
+        "--k-process",
+        "30",
+        "--n-descr",
+        "30",
+    ];
+    let batch = |out: &std::path::Path, extra: &[&str]| {
+        let o = fmaps()
+            .args([
+                "--threads",
+                "2",
+                "batch",
+                &s(&pairs),
+                "--data",
+                &s(&data),
+                "--out",
+                &s(out),
+            ])
+            .args(extra)
+            .args(opts)
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        String::from_utf8_lossy(&o.stderr).into_owned()
+    };
+    let out = dir.join("out");
+    let log = batch(&out, &[]);
+    assert!(log.contains("3 matched, 0 already done, 0 failed"), "{log}");
+    // One basis per shape, each computed once.
+    assert_eq!(std::fs::read_dir(out.join("bases")).unwrap().count(), 3);
+    let report = std::fs::read_to_string(out.join("report.jsonl")).unwrap();
+    let lines: Vec<serde_json::Value> = report
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    assert_eq!(lines.len(), 3);
+    let names: Vec<(&str, &str)> = lines
+        .iter()
+        .map(|v| (v["source"].as_str().unwrap(), v["target"].as_str().unwrap()))
+        .collect();
+    assert_eq!(names, [("rest", "walk"), ("walk", "big"), ("rest", "big")]);
+    let computed = lines
+        .iter()
+        .flat_map(|v| [&v["bases"]["source"], &v["bases"]["target"]])
+        .filter(|b| b.as_str() == Some("computed"))
+        .count();
+    assert_eq!(computed, 3);
+    // The same map as `fmaps match` with the same options.
+    let single = dir.join("single.map");
+    let o = fmaps()
+        .args([
+            "match",
+            &s(&data.join("walk.ply")),
+            &s(&data.join("big.obj")),
+        ])
+        .args(["--out", &s(&single)])
+        .args(&opts[1..])
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let read = |p: std::path::PathBuf| fmaps::mesh_io::read_map(p).unwrap();
+    assert_eq!(read(single), read(out.join("walk_big.map")));
+    // Killed after two pairs: the third runs again, from cached bases, to
+    // the same map.
+    let before = read(out.join("rest_big.map"));
+    std::fs::remove_file(out.join("rest_big.json")).unwrap();
+    let log = batch(&out, &[]);
+    assert!(log.contains("1 matched, 2 already done"), "{log}");
+    assert_eq!(read(out.join("rest_big.map")), before);
+    let again = std::fs::read_to_string(out.join("rest_big.json")).unwrap();
+    assert!(
+        again.contains(r#""bases":{"source":"cached","target":"cached"}"#),
+        "{again}"
+    );
+    // Two shards: each pair exactly once.
+    let sharded = dir.join("sharded");
+    batch(&sharded, &["--shard", "1/2"]);
+    batch(&sharded, &["--shard", "2/2"]);
+    let report = std::fs::read_to_string(sharded.join("report.jsonl")).unwrap();
+    assert_eq!(report.lines().count(), 3);
+    // A bad pairs line: exit code 2 naming the file and line.
+    std::fs::write(&pairs, "rest walk\nrest\n").unwrap();
+    let o = fmaps()
+        .args(["batch", &s(&pairs), "--data", &s(&data), "--out", &s(&out)])
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        err.contains("pairs.txt: line 2: expected two shape names"),
+        "{err}"
+    );
+}

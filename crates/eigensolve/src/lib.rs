@@ -171,7 +171,8 @@ pub trait EigenSolver {
 }
 
 /// How a solve went: for the user to check, never needed to use the result.
-#[derive(Debug, Clone, PartialEq)]
+/// (`Default`: nothing known, e.g. a basis read back from a cache.)
+#[derive(Debug, Clone, PartialEq, Default)]
 #[non_exhaustive]
 pub struct SolveReport {
     /// The backend that produced the basis.

@@ -421,6 +421,19 @@ pub struct PreparedShape {
 /// when [`MatchParams::area_normalize`] is on (the default), so that
 /// nothing downstream depends on the mesh's units.
 pub fn prepare(mesh: &TriMesh, params: &MatchParams) -> Result<PreparedShape, MatchError> {
+    prepare_with_basis(mesh, params, None)
+}
+
+/// [`prepare`], with the eigenbasis taken from `cached` when given (a
+/// basis [`prepare`] computed earlier for the same mesh and parameters,
+/// e.g. from `fmaps batch`'s cache): the same normalization, no
+/// eigensolve. A cached basis with another vertex count or fewer than
+/// `k_process` pairs is an error.
+pub fn prepare_with_basis(
+    mesh: &TriMesh,
+    params: &MatchParams,
+    cached: Option<SpectralBasis>,
+) -> Result<PreparedShape, MatchError> {
     params.check()?;
     let t = Instant::now();
     let input_area = mesh.area();
@@ -434,17 +447,37 @@ pub fn prepare(mesh: &TriMesh, params: &MatchParams) -> Result<PreparedShape, Ma
         (None, 1.0)
     };
     let mesh = normalized.as_ref().unwrap_or(mesh);
-    let out = spectrum(mesh, params.k_process, &params.spectrum).map_err(|source| {
-        MatchError::Spectrum {
-            shape: "input",
-            source,
+    let basis = match cached {
+        Some(b) => {
+            if b.eigenvectors.nrows() != mesh.n_vertices() || b.eigenvalues.len() < params.k_process
+            {
+                return Err(MatchError::InvalidShape {
+                    shape: "input",
+                    message: format!(
+                        "the cached eigenbasis has {} rows and {} pairs, the mesh {} vertices and k_process = {}",
+                        b.eigenvectors.nrows(),
+                        b.eigenvalues.len(),
+                        mesh.n_vertices(),
+                        params.k_process
+                    ),
+                });
+            }
+            b
         }
-    })?;
-    let area = out.basis.mass.iter().sum();
+        None => {
+            spectrum(mesh, params.k_process, &params.spectrum)
+                .map_err(|source| MatchError::Spectrum {
+                    shape: "input",
+                    source,
+                })?
+                .basis
+        }
+    };
+    let area = basis.mass.iter().sum();
     Ok(PreparedShape {
         vertices: mesh.vertices().to_vec(),
         faces: mesh.faces().to_vec(),
-        basis: out.basis,
+        basis,
         area,
         input_area,
         scale,

@@ -46,6 +46,7 @@
 #![forbid(unsafe_code)]
 
 pub mod atomic;
+pub mod basis;
 pub mod body;
 mod corres;
 mod creature;

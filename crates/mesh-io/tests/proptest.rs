@@ -149,6 +149,12 @@ fn all_parsers(data: &[u8]) {
         "landmarks: {peak} bytes for {} input bytes",
         data.len()
     );
+    let (_, peak) = peak_of(|| fmaps_mesh_io::basis::parse_basis(data));
+    assert!(
+        peak <= bound,
+        "basis cache: {peak} bytes for {} input bytes",
+        data.len()
+    );
 }
 
 fn mesh_strategy() -> impl Strategy<Value = TriMesh> {
@@ -168,6 +174,17 @@ fn mesh_strategy() -> impl Strategy<Value = TriMesh> {
 
 proptest! {
     #![proptest_config(ProptestConfig::with_cases(cases()))]
+
+    #[test]
+    fn basis_files_with_random_sizes_never_panic(n in any::<u64>(), k in any::<u64>(), tail in prop::collection::vec(any::<u8>(), 0..400)) {
+        let mut data = b"FMAPS-BASIS-1\n".to_vec();
+        data.extend_from_slice(&3u32.to_le_bytes());
+        data.extend_from_slice(b"key");
+        data.extend_from_slice(&n.to_le_bytes());
+        data.extend_from_slice(&k.to_le_bytes());
+        data.extend_from_slice(&tail);
+        all_parsers(&data);
+    }
 
     #[test]
     fn random_bytes_never_panic(data in prop::collection::vec(any::<u8>(), 0..2000)) {
