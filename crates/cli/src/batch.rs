@@ -266,6 +266,8 @@ pub(crate) fn batch(args: &BatchArgs) -> Result<(), Failure> {
         prepared: HashMap::new(),
     };
     let (mut done, mut skipped, mut failed) = (0usize, 0usize, 0usize);
+    // The exit code of the failures: 2 if any pair had bad input, else 1.
+    let mut code = 1;
     for p in &mine {
         let stem = format!("{}_{}", p.a, p.b);
         if args.out.join(format!("{stem}.json")).is_file() {
@@ -274,8 +276,9 @@ pub(crate) fn batch(args: &BatchArgs) -> Result<(), Failure> {
         }
         match run_pair(&mut shapes, &m, p, &stem) {
             Ok(()) => done += 1,
-            Err(Failure(_, e)) => {
+            Err(Failure(c, e)) => {
                 failed += 1;
+                code = code.max(c);
                 eprintln!("error: {stem} (line {}): {e:#}", p.line);
             }
         }
@@ -289,7 +292,10 @@ pub(crate) fn batch(args: &BatchArgs) -> Result<(), Failure> {
         args.out.join("report.jsonl").display()
     );
     if failed > 0 {
-        return Err(runtime(anyhow::anyhow!("{failed} pairs failed")));
+        return Err(Failure(
+            code,
+            anyhow::anyhow!("{failed} pairs failed (exit code 2: bad input in at least one)"),
+        ));
     }
     Ok(())
 }
