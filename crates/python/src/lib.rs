@@ -112,6 +112,12 @@ impl Mesh {
         })
     }
 
+    /// Writes the mesh (format from the extension: .off, .obj, .ply),
+    /// atomically.
+    fn save(&self, path: PathBuf) -> PyResult<()> {
+        fmaps::mesh_io::write_mesh(&path, &self.inner).map_err(err_on(&path))
+    }
+
     /// Vertex positions (n x 3 float64, a copy).
     #[getter]
     fn vertices<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> {
@@ -292,7 +298,7 @@ fn indices(py: Python<'_>, v: &[usize]) -> Py<PyArray1<i64>> {
 /// defaults and the same maps for the same options, on any number of
 /// threads).
 #[pyfunction]
-#[pyo3(signature = (a, b, *, refine = "default", k = 50, k_process = 200, w_orient = None, mirrored = false, area_normalize = true, threads = None))]
+#[pyo3(signature = (a, b, *, refine = "default", k = 50, k_process = 200, w_orient = None, mirrored = false, area_normalize = true, starts = None, threads = None))]
 #[allow(clippy::too_many_arguments)]
 fn match_shapes(
     py: Python<'_>,
@@ -304,11 +310,12 @@ fn match_shapes(
     w_orient: Option<f64>,
     mirrored: bool,
     area_normalize: bool,
+    starts: Option<Vec<usize>>,
     threads: Option<usize>,
 ) -> PyResult<MatchResult> {
     let (ma, mb) = (Arc::clone(&a.inner), Arc::clone(&b.inner));
     let smallest = ma.n_vertices().min(mb.n_vertices());
-    let params = params_for(
+    let mut params = params_for(
         refine,
         smallest,
         k,
@@ -317,12 +324,25 @@ fn match_shapes(
         mirrored,
         area_normalize,
     )?;
+    if let Some(s) = starts {
+        // Further initial sizes (`[]`: one start, as pyFM runs ZoomOut).
+        params.starts = s;
+    }
     let (r, quality) = run(py, threads, move || {
         let r = fmaps::match_shapes(&ma, &mb, &params).map_err(|e| e.to_string())?;
         let q = fmaps::eval::map_quality(&r.t_ab, &ma, &mb, None).map_err(|e| e.to_string())?;
         Ok::<_, String>((r, q))
     })?
     .map_err(err)?;
+    result(py, r, quality)
+}
+
+/// The Python result of a pipeline run and its quality scores.
+fn result(
+    py: Python<'_>,
+    r: fmaps::MatchResult,
+    quality: fmaps::eval::MapQuality,
+) -> PyResult<MatchResult> {
     let times = PyDict::new(py);
     let t = r.times;
     for (name, v) in [
@@ -358,6 +378,214 @@ fn match_shapes(
         quality: q.unbind(),
         refiner,
         seconds_per_iteration,
+    })
+}
+
+/// One shape after the per-shape stages (scaled to unit area unless told
+/// otherwise; Laplacian and `k_process` eigenpairs), reusable across all
+/// its pairs: [`match_prepared`] takes two. Picklable (numpy arrays), so
+/// Ray and multiprocessing pass it between processes.
+#[pyclass(module = "fmaps._fmaps", frozen)]
+struct PreparedShape {
+    inner: Arc<fmaps::pipeline::PreparedShape>,
+    area_normalize: bool,
+}
+
+#[pymethods]
+impl PreparedShape {
+    /// Eigenpairs held.
+    #[getter]
+    fn k_process(&self) -> usize {
+        self.inner.basis.eigenvalues.len()
+    }
+
+    /// Vertices.
+    #[getter]
+    fn n_vertices(&self) -> usize {
+        self.inner.vertices.len()
+    }
+
+    /// Seconds its Laplacian and eigenbasis took.
+    #[getter]
+    fn seconds(&self) -> f64 {
+        self.inner.seconds
+    }
+
+    fn __repr__(&self) -> String {
+        format!(
+            "PreparedShape({} vertices, {} eigenpairs)",
+            self.n_vertices(),
+            self.k_process()
+        )
+    }
+
+    /// Pickling: the state as numpy arrays and numbers.
+    fn __reduce__<'py>(&self, py: Python<'py>) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyAny>)> {
+        let p = &self.inner;
+        let verts: Vec<f64> = p.vertices.iter().flatten().copied().collect();
+        let faces: Vec<i64> = p.faces.iter().flatten().map(|&i| i as i64).collect();
+        let state = (
+            Array2::from_shape_vec((p.vertices.len(), 3), verts)
+                .expect("n x 3")
+                .into_pyarray(py),
+            Array2::from_shape_vec((p.faces.len(), 3), faces)
+                .expect("m x 3")
+                .into_pyarray(py),
+            p.basis.eigenvalues.as_slice().to_vec().into_pyarray(py),
+            fortran(p.basis.eigenvectors.clone()).into_pyarray(py),
+            p.basis.mass.as_slice().to_vec().into_pyarray(py),
+            (
+                p.area,
+                p.input_area,
+                p.scale,
+                p.seconds,
+                self.area_normalize,
+            ),
+        );
+        let module = py.import("fmaps._fmaps")?;
+        Ok((
+            module.getattr("_prepared_from_state")?,
+            (state,).into_pyobject(py)?.into_any(),
+        ))
+    }
+}
+
+/// Rebuilds a [`PreparedShape`] from its pickled state.
+#[pyfunction]
+#[allow(clippy::type_complexity)]
+fn _prepared_from_state(
+    state: (
+        PyReadonlyArray2<'_, f64>,
+        PyReadonlyArray2<'_, i64>,
+        PyReadonlyArray1<'_, f64>,
+        PyReadonlyArray2<'_, f64>,
+        PyReadonlyArray1<'_, f64>,
+        (f64, f64, f64, f64, bool),
+    ),
+) -> PyResult<PreparedShape> {
+    let (v, f, evals, vecs, mass, (area, input_area, scale, seconds, area_normalize)) = state;
+    let mesh = Mesh::new(v, f)?;
+    let vecs = vecs.as_array();
+    let (n, k) = (vecs.nrows(), vecs.ncols());
+    if n != mesh.inner.n_vertices() || evals.len()? != k || mass.len()? != n {
+        return Err(err(
+            "a pickled PreparedShape whose arrays do not fit together",
+        ));
+    }
+    let mut report = fmaps::eigensolve::SolveReport::default();
+    report.backend = "pickle";
+    let basis = fmaps::eigensolve::SpectralBasis {
+        eigenvalues: nalgebra::DVector::from_iterator(k, evals.as_array().iter().copied()),
+        eigenvectors: DMatrix::from_fn(n, k, |i, j| vecs[(i, j)]),
+        mass: nalgebra::DVector::from_iterator(n, mass.as_array().iter().copied()),
+        report,
+    };
+    Ok(PreparedShape {
+        inner: Arc::new(fmaps::pipeline::PreparedShape {
+            vertices: mesh.inner.vertices().to_vec(),
+            faces: mesh.inner.faces().to_vec(),
+            basis,
+            area,
+            input_area,
+            scale,
+            seconds,
+        }),
+        area_normalize,
+    })
+}
+
+/// The per-shape stages of the pipeline for `mesh`: scaled to unit area
+/// (unless `area_normalize` is off), Laplacian, `k_process` eigenpairs.
+/// Compute it once per shape and match it with [`match_prepared`] against
+/// every other (the maps equal [`match_shapes`]'s).
+#[pyfunction]
+#[pyo3(signature = (mesh, *, k_process = 200, area_normalize = true, threads = None))]
+fn prepare(
+    py: Python<'_>,
+    mesh: &Mesh,
+    k_process: usize,
+    area_normalize: bool,
+    threads: Option<usize>,
+) -> PyResult<PreparedShape> {
+    let m = Arc::clone(&mesh.inner);
+    let params = MatchParams {
+        k_process,
+        k_descr: MatchParams::default().k_descr.min(k_process),
+        area_normalize,
+        ..MatchParams::default()
+    };
+    // One thread for the eigensolver, as the pipeline prepares its shapes
+    // (the basis does not depend on it).
+    let mut single = params.clone();
+    single.spectrum.threads = 1;
+    let p = run(py, threads, move || fmaps::pipeline::prepare(&m, &single))?.map_err(err)?;
+    Ok(PreparedShape {
+        inner: Arc::new(p),
+        area_normalize,
+    })
+}
+
+/// [`match_shapes`] on two prepared shapes (same options; `k_process` and
+/// `area_normalize` are the shapes'). Quality scores are computed on the
+/// prepared (unit-area) meshes.
+#[pyfunction]
+#[pyo3(signature = (a, b, *, refine = "default", k = 50, w_orient = None, mirrored = false, starts = None, threads = None))]
+#[allow(clippy::too_many_arguments)]
+fn match_prepared(
+    py: Python<'_>,
+    a: &PreparedShape,
+    b: &PreparedShape,
+    refine: &str,
+    k: usize,
+    w_orient: Option<f64>,
+    mirrored: bool,
+    starts: Option<Vec<usize>>,
+    threads: Option<usize>,
+) -> PyResult<MatchResult> {
+    if a.area_normalize != b.area_normalize {
+        return Err(err(
+            "the two shapes were prepared with different area_normalize settings",
+        ));
+    }
+    let k_process = a.k_process().min(b.k_process());
+    let (pa, pb) = (Arc::clone(&a.inner), Arc::clone(&b.inner));
+    let smallest = pa.vertices.len().min(pb.vertices.len());
+    let mut params = params_for(
+        refine,
+        smallest,
+        k,
+        k_process,
+        w_orient,
+        mirrored,
+        a.area_normalize,
+    )?;
+    if let Some(s) = starts {
+        params.starts = s;
+    }
+    let (r, quality) = run(py, threads, move || {
+        let r = fmaps::pipeline::match_prepared(&pa, &pb, &params).map_err(|e| e.to_string())?;
+        let mesh = |p: &fmaps::pipeline::PreparedShape| {
+            TriMesh::new(p.vertices.clone(), p.faces.clone()).map_err(|e| e.to_string())
+        };
+        let q = fmaps::eval::map_quality(&r.t_ab, &mesh(&pa)?, &mesh(&pb)?, None)
+            .map_err(|e| e.to_string())?;
+        Ok::<_, String>((r, q))
+    })?
+    .map_err(err)?;
+    result(py, r, quality)
+}
+
+/// Shape `pose` (0 rest, 1 walking, 2 crouching, 3 reaching) of individual
+/// `individual` of the generated body collection (`cargo xtask eval
+/// --collection generated-noniso`'s `body_I_P`): independently meshed,
+/// different builds.
+#[pyfunction]
+fn generated_body(py: Python<'_>, individual: usize, pose: usize) -> PyResult<Mesh> {
+    let shape = py
+        .detach(|| fmaps::mesh_io::body::Body::template().collection_shape(individual, pose))
+        .map_err(err)?;
+    Ok(Mesh {
+        inner: Arc::new(shape.mesh),
     })
 }
 
@@ -509,6 +737,11 @@ fn _fmaps(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("FmapsError", m.py().get_type::<FmapsError>())?;
     m.add_class::<Mesh>()?;
     m.add_class::<MatchResult>()?;
+    m.add_class::<PreparedShape>()?;
+    m.add_function(wrap_pyfunction!(prepare, m)?)?;
+    m.add_function(wrap_pyfunction!(match_prepared, m)?)?;
+    m.add_function(wrap_pyfunction!(_prepared_from_state, m)?)?;
+    m.add_function(wrap_pyfunction!(generated_body, m)?)?;
     m.add_function(wrap_pyfunction!(spectrum, m)?)?;
     m.add_function(wrap_pyfunction!(match_shapes, m)?)?;
     m.add_function(wrap_pyfunction!(evaluate, m)?)?;

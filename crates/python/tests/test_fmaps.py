@@ -162,3 +162,16 @@ def test_long_calls_release_the_gil(pairs):
     # With the GIL held for the whole match the loop would run once or
     # twice; released, it runs about once per millisecond.
     assert elapsed > 0.5 and ticks > elapsed * 100, (ticks, elapsed)
+
+
+def test_prepared_shapes_pickle_and_give_the_same_map(pairs):
+    import pickle
+
+    p = pairs[0]
+    pa = pickle.loads(pickle.dumps(fmaps.prepare(p["a"], threads=2)))
+    pb = fmaps.prepare(p["b"], threads=2)
+    assert pa.n_vertices == p["a"].n_vertices and pa.k_process == 200
+    r = fmaps.match_prepared(pa, pb, threads=2)
+    want = fmaps.match_shapes(p["a"], p["b"], threads=2)
+    assert np.array_equal(r.map_ab, want.map_ab)
+    assert np.array_equal(r.c_ba, want.c_ba)

@@ -13,16 +13,24 @@ of A goes to (0-based); ``c_ba`` maps coefficients on B to coefficients
 on A. Long calls release the GIL and run on ``threads`` threads (default:
 one per core). Errors raise :class:`FmapsError` (a ``ValueError``) with
 the message the ``fmaps`` command prints.
+
+A shape's eigenbasis can be computed once (:func:`prepare`) and matched
+against many (:func:`match_prepared`); :mod:`fmaps.distributed` does that
+for whole collections on a Ray cluster.
 """
 
 from ._fmaps import (
     FmapsError,
     MatchResult,
     Mesh,
+    PreparedShape,
     __version__,
     demo_pairs,
     evaluate,
+    generated_body,
+    match_prepared,
     match_shapes,
+    prepare,
     read_indices,
     spectrum,
 )
@@ -31,10 +39,14 @@ __all__ = [
     "FmapsError",
     "MatchResult",
     "Mesh",
+    "PreparedShape",
     "__version__",
     "demo_pairs",
     "evaluate",
+    "generated_body",
+    "match_prepared",
     "match_shapes",
+    "prepare",
     "read_indices",
     "spectrum",
 ]

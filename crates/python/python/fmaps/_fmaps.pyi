@@ -28,6 +28,18 @@ class Mesh:
     @property
     def n_faces(self) -> int: ...
     def area(self) -> float: ...
+    def save(self, path: Union[str, PathLike]) -> None:
+        """Writes .off, .obj or .ply (from the extension), atomically."""
+
+class PreparedShape:
+    """A shape after the per-shape stages (unit area, Laplacian, eigenbasis); picklable."""
+
+    @property
+    def k_process(self) -> int: ...
+    @property
+    def n_vertices(self) -> int: ...
+    @property
+    def seconds(self) -> float: ...
 
 class MatchResult:
     """The result of :func:`match_shapes`."""
@@ -64,9 +76,32 @@ def match_shapes(
     w_orient: Optional[float] = None,
     mirrored: bool = False,
     area_normalize: bool = True,
+    starts: Optional[list] = None,
     threads: Optional[int] = None,
 ) -> MatchResult:
-    """The pipeline of `fmaps match`; refine: "default" (Smooth Shells), "smooth-shells", "zoomout", "icp", "none"."""
+    """The pipeline of `fmaps match`; refine: "default" (Smooth Shells), "smooth-shells", "zoomout", "icp", "none";
+    starts: further initial sizes ([] = one start; None = the CLI's default)."""
+
+def prepare(
+    mesh: Mesh, *, k_process: int = 200, area_normalize: bool = True, threads: Optional[int] = None
+) -> PreparedShape:
+    """The per-shape stages, computed once per shape."""
+
+def match_prepared(
+    a: PreparedShape,
+    b: PreparedShape,
+    *,
+    refine: str = "default",
+    k: int = 50,
+    w_orient: Optional[float] = None,
+    mirrored: bool = False,
+    starts: Optional[list] = None,
+    threads: Optional[int] = None,
+) -> MatchResult:
+    """`match_shapes` on prepared shapes (the same maps)."""
+
+def generated_body(individual: int, pose: int) -> Mesh:
+    """Shape body_{individual}_{pose} of the generated body collection."""
 
 def evaluate(
     a: Mesh,
