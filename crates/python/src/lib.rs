@@ -16,6 +16,10 @@
 //! Arrays come out without copies: Rust's vectors and column-major
 //! matrices become numpy arrays (C- or Fortran-ordered) that own them.
 //! Meshes are copied in (a mesh owns its vertices and faces).
+//!
+//! (tidy: long file: one `#[pymodule]` is one Rust module here; its
+//! functions share the argument conversions, the error mapping and the
+//! GIL-free runner, and each is a thin call into the facade.)
 #![deny(unsafe_code)]
 
 use std::path::PathBuf;
@@ -731,6 +735,78 @@ fn demo_pairs(py: Python<'_>, subdivisions: u32) -> PyResult<Vec<Bound<'_, PyDic
         .collect()
 }
 
+/// Draws a map as a PNG (source left, target right, `path` written
+/// atomically): `kind="color"` colours the source by position and carries
+/// the colours to the target through `map_ab`; `"texture"` carries a
+/// checkerboard. `up` is the shapes' vertical axis ("x", "y", "z"), `yaw`
+/// a turn about it (degrees). Returns the picture's (width, height).
+#[pyfunction]
+#[pyo3(signature = (a, b, map_ab, path, *, kind = "color", up = "y", yaw = 0.0, size = 480))]
+#[allow(clippy::too_many_arguments)]
+fn render_transfer(
+    py: Python<'_>,
+    a: &Mesh,
+    b: &Mesh,
+    map_ab: PyReadonlyArray1<'_, i64>,
+    path: PathBuf,
+    kind: &str,
+    up: &str,
+    yaw: f64,
+    size: usize,
+) -> PyResult<(usize, usize)> {
+    use fmaps::viz::{Axis, View};
+    let (na, nb) = (a.inner.n_vertices(), b.inner.n_vertices());
+    if map_ab.len()? != na {
+        return Err(err(format!(
+            "map_ab has {} entries, A has {na} vertices",
+            map_ab.len()?
+        )));
+    }
+    let t_ab = checked(&map_ab, nb, "map_ab")?;
+    let axis = match up {
+        "x" => Axis::X,
+        "y" => Axis::Y,
+        "z" => Axis::Z,
+        other => {
+            return Err(err(format!(
+                "up = {other:?}: expected \"x\", \"y\" or \"z\""
+            )));
+        }
+    };
+    if !(16..=8192).contains(&size) {
+        return Err(err(format!("size = {size}: use 16..=8192 pixels")));
+    }
+    let view = View {
+        up: axis,
+        width: size,
+        height: size,
+        yaw: yaw.to_radians(),
+        ..View::default()
+    };
+    let (ma, mb) = (Arc::clone(&a.inner), Arc::clone(&b.inner));
+    let texture = match kind {
+        "color" => false,
+        "texture" => true,
+        other => {
+            return Err(err(format!(
+                "kind = {other:?}: expected \"color\" or \"texture\""
+            )));
+        }
+    };
+    py.detach(move || {
+        let (img, _, _) = if texture {
+            fmaps::pictures::texture_transfer(&ma, &mb, &t_ab, 12, &view)
+        } else {
+            fmaps::pictures::color_transfer(&ma, &mb, &t_ab, &view)
+        }
+        .map_err(|e| e.to_string())?;
+        img.save_png(&path)
+            .map_err(|e| format!("{}: {e}", path.display()))?;
+        Ok::<_, String>((img.width(), img.height()))
+    })
+    .map_err(err)
+}
+
 /// The extension module.
 #[pymodule]
 fn _fmaps(m: &Bound<'_, PyModule>) -> PyResult<()> {
@@ -742,6 +818,7 @@ fn _fmaps(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(match_prepared, m)?)?;
     m.add_function(wrap_pyfunction!(_prepared_from_state, m)?)?;
     m.add_function(wrap_pyfunction!(generated_body, m)?)?;
+    m.add_function(wrap_pyfunction!(render_transfer, m)?)?;
     m.add_function(wrap_pyfunction!(spectrum, m)?)?;
     m.add_function(wrap_pyfunction!(match_shapes, m)?)?;
     m.add_function(wrap_pyfunction!(evaluate, m)?)?;

@@ -175,3 +175,22 @@ def test_prepared_shapes_pickle_and_give_the_same_map(pairs):
     want = fmaps.match_shapes(p["a"], p["b"], threads=2)
     assert np.array_equal(r.map_ab, want.map_ab)
     assert np.array_equal(r.c_ba, want.c_ba)
+
+
+def test_the_example_script_writes_pictures(tmp_path):
+    import sys
+
+    script = Path(__file__).resolve().parents[1] / "examples" / "match_and_draw.py"
+    out = subprocess.run(
+        [sys.executable, str(script), "--out", str(tmp_path)], check=True, capture_output=True, text=True
+    )
+    # The demo's bodies: the default's error, as `fmaps demo` prints it.
+    assert "mean geodesic error x100: 3.03" in out.stdout, out.stdout
+    for kind in ("color", "texture"):
+        png = (tmp_path / f"{kind}-transfer.png").read_bytes()
+        assert png[:8] == b"\x89PNG\r\n\x1a\n"
+        # IHDR: width (two 480-pixel panels side by side) and height.
+        assert int.from_bytes(png[16:20], "big") == 960 and int.from_bytes(png[20:24], "big") == 480
+    with pytest.raises(fmaps.FmapsError, match="kind"):
+        m = fmaps.demo_pairs()[0]["a"]
+        fmaps.render_transfer(m, m, np.arange(m.n_vertices), tmp_path / "x.png", kind="bogus")

@@ -32,6 +32,7 @@ from ._fmaps import (
     match_shapes,
     prepare,
     read_indices,
+    render_transfer,
     spectrum,
 )
 
@@ -48,5 +49,6 @@ __all__ = [
     "match_shapes",
     "prepare",
     "read_indices",
+    "render_transfer",
     "spectrum",
 ]

@@ -120,3 +120,16 @@ def read_indices(path: Union[str, PathLike]) -> npt.NDArray[np.int64]:
 
 def demo_pairs(subdivisions: int = 4) -> list:
     """The built-in pairs of `fmaps demo`: dicts with name, title, a, b, gt_a, gt_b, gt_b_sym."""
+
+def render_transfer(
+    a: Mesh,
+    b: Mesh,
+    map_ab: npt.ArrayLike,
+    path: Union[str, PathLike],
+    *,
+    kind: str = "color",
+    up: str = "y",
+    yaw: float = 0.0,
+    size: int = 480,
+) -> Tuple[int, int]:
+    """Draws the map as a PNG (source left, target right); kind "color" or "texture"."""
