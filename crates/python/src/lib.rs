@@ -608,6 +608,19 @@ fn checked(v: &PyReadonlyArray1<'_, i64>, n: usize, what: &str) -> PyResult<Vec<
         .collect()
 }
 
+/// `map_ab` checked as a map from `a` to `b`: one entry per vertex of A,
+/// each a vertex of B.
+fn map_between(map_ab: &PyReadonlyArray1<'_, i64>, a: &Mesh, b: &Mesh) -> PyResult<Vec<usize>> {
+    let (na, nb) = (a.inner.n_vertices(), b.inner.n_vertices());
+    if map_ab.len()? != na {
+        return Err(err(format!(
+            "map_ab has {} entries, A has {na} vertices",
+            map_ab.len()?
+        )));
+    }
+    checked(map_ab, nb, "map_ab")
+}
+
 /// Geodesic errors of `map_ab` against ground truth, as `fmaps eval`
 /// (normalised by √area(B)): `gt_a[i]` of A corresponds to `gt_b[i]` of B
 /// (and to `gt_b_sym[i]` under the symmetry). Returns a dict: mean_error,
@@ -628,13 +641,7 @@ fn evaluate<'py>(
 ) -> PyResult<Bound<'py, PyDict>> {
     use fmaps::geodesic::{DijkstraSolver, DistanceSolver, ExactSolver, HeatParams, HeatSolver};
     let (na, nb) = (a.inner.n_vertices(), b.inner.n_vertices());
-    if map_ab.len()? != na {
-        return Err(err(format!(
-            "map_ab has {} entries, A has {na} vertices",
-            map_ab.len()?
-        )));
-    }
-    let t_ab = checked(&map_ab, nb, "map_ab")?;
+    let t_ab = map_between(&map_ab, a, b)?;
     let gt = fmaps::eval::GroundTruth::new(
         checked(&gt_a, na, "gt_a")?,
         checked(&gt_b, nb, "gt_b")?,
@@ -755,14 +762,7 @@ fn render_transfer(
     size: usize,
 ) -> PyResult<(usize, usize)> {
     use fmaps::viz::{Axis, View};
-    let (na, nb) = (a.inner.n_vertices(), b.inner.n_vertices());
-    if map_ab.len()? != na {
-        return Err(err(format!(
-            "map_ab has {} entries, A has {na} vertices",
-            map_ab.len()?
-        )));
-    }
-    let t_ab = checked(&map_ab, nb, "map_ab")?;
+    let t_ab = map_between(&map_ab, a, b)?;
     let axis = match up {
         "x" => Axis::X,
         "y" => Axis::Y,
