@@ -3,7 +3,7 @@
 use super::*;
 
 use fmaps::pipeline::MatchParams;
-use fmaps::refine::{Icp, ZoomOut};
+use fmaps::refine::Icp;
 
 /// The library's defaults, which the flags show and use.
 fn defaults() -> MatchParams {
@@ -133,12 +133,17 @@ pub(crate) enum RefineKind {
 }
 
 impl RefineKind {
-    /// The discrete-optimisation preset of this kind, if it is one.
-    pub(crate) fn discrete_preset(self) -> Option<&'static str> {
+    /// The facade's name for this kind.
+    pub(crate) fn kind(self) -> fmaps::pipeline::RefinerKind {
+        use fmaps::pipeline::RefinerKind as K;
         match self {
-            RefineKind::BijectiveZoomout => Some("bijective-zoomout"),
-            RefineKind::Discrete => Some("discrete"),
-            _ => None,
+            RefineKind::None => K::None,
+            RefineKind::Icp => K::Icp,
+            RefineKind::Zoomout => K::Zoomout,
+            RefineKind::BijectiveZoomout => K::BijectiveZoomout,
+            RefineKind::Discrete => K::Discrete,
+            RefineKind::Bcicp => K::Bcicp,
+            RefineKind::SmoothShells => K::SmoothShells,
         }
     }
 }
@@ -163,107 +168,40 @@ pub(crate) enum ConversionKind {
     Sinkhorn,
 }
 
-impl ConversionKind {
-    pub(crate) fn sinkhorn(self) -> Option<fmaps::solve::sinkhorn::Sinkhorn> {
-        (self == ConversionKind::Sinkhorn).then(fmaps::solve::sinkhorn::Sinkhorn::default)
-    }
-}
-
-/// A discrete-optimisation preset on the schedule `zoomout` (START:FINAL:
-/// STEP, default 50:150:5), refused when it starts beyond the map's `k`.
-pub(crate) fn discrete_refinement(
-    preset: &str,
-    zoomout: Option<&str>,
-    k: usize,
-    conversion: ConversionKind,
-) -> Result<fmaps::pipeline::Refinement, Failure> {
-    let mut d = fmaps::refine::DiscreteOp::preset(preset).map_err(input)?;
-    d.sinkhorn = conversion.sinkhorn();
-    if let Some(text) = zoomout {
-        let z =
-            ZoomOut::with_schedule(text).map_err(|e| input(anyhow::anyhow!("--zoomout: {e}")))?;
-        (d.k_start, d.k_final, d.step) = (z.k_start, z.k_final, z.step);
-    }
-    if d.k_start > k {
-        return Err(input(anyhow::anyhow!(
-            "--zoomout starts at {}, but the initial map is only {k} x {k} (--k {k})",
-            d.k_start
-        )));
-    }
-    Ok(fmaps::pipeline::Refinement::Custom(std::sync::Arc::new(d)))
-}
-
 pub(crate) fn read_landmarks(path: &Path) -> Result<mesh_io::Landmarks, Failure> {
     mesh_io::read_landmarks(path).map_err(input)
 }
 
-/// The refinement asked for on the command line; without refinement
-/// flags the recommended one, if both meshes (the smaller has `smallest`
-/// vertices) are large enough for its basis, else none.
-pub(crate) fn refinement(
+/// The refinement asked for on the command line (its kind and the
+/// facade's refinement); without refinement flags the facade's default
+/// for meshes whose smaller one has `smallest` vertices.
+fn refinement(
     args: &MatchArgs,
     smallest: usize,
-) -> Result<fmaps::pipeline::Refinement, Failure> {
-    use fmaps::pipeline::Refinement;
+) -> Result<(fmaps::pipeline::RefinerKind, fmaps::pipeline::Refinement), Failure> {
+    use fmaps::pipeline::RefinerKind;
     let kind = match (args.refine, &args.zoomout) {
-        (Some(k), _) => k,
-        (None, Some(_)) => RefineKind::Zoomout,
-        (None, None) if default_fits(smallest) => RefineKind::SmoothShells,
-        (None, None) => RefineKind::None,
+        (Some(k), _) => k.kind(),
+        (None, Some(_)) => RefinerKind::Zoomout,
+        (None, None) => RefinerKind::default_for(smallest),
     };
-    let bad = |m: String| Err(input(anyhow::anyhow!(m)));
-    if let Some(preset) = kind.discrete_preset() {
-        return discrete_refinement(preset, args.zoomout.as_deref(), args.k, args.conversion);
-    }
-    Ok(match kind {
-        RefineKind::None => Refinement::None,
-        RefineKind::Bcicp => {
-            Refinement::Custom(std::sync::Arc::new(fmaps::refine::Repair::default()))
-        }
-        RefineKind::SmoothShells => {
-            Refinement::Custom(std::sync::Arc::new(fmaps::refine::SmoothShells {
-                reflect: args.mirrored,
-                ..Default::default()
-            }))
-        }
-        RefineKind::Icp => Refinement::Icp(Icp {
-            max_iterations: args.icp_iterations,
-            adjoint: args.adjoint,
-            sinkhorn: args.conversion.sinkhorn(),
-        }),
-        RefineKind::Zoomout | RefineKind::BijectiveZoomout | RefineKind::Discrete => {
-            let schedule = match &args.zoomout {
-                None => ZoomOut::default(),
-                Some(text) => ZoomOut::with_schedule(text)
-                    .map_err(|e| input(anyhow::anyhow!("--zoomout: {e}")))?,
-            };
-            let (k_start, k_final, step) = (schedule.k_start, schedule.k_final, schedule.step);
-            if k_start > args.k {
-                return bad(format!(
-                    "--zoomout starts at {k_start}, but the initial map is only {k} x {k} (--k {k})",
-                    k = args.k
-                ));
-            }
-            Refinement::ZoomOut {
-                zoomout: ZoomOut {
-                    k_start,
-                    k_final,
-                    step,
-                    adjoint: args.adjoint,
-                    bijective: args.bijective,
-                    subsample: None,
-                    sinkhorn: args.conversion.sinkhorn(),
-                },
-                samples: args.refine_samples,
-            }
-        }
-    })
+    let options = fmaps::pipeline::RefineOptions {
+        k: args.k,
+        schedule: args.zoomout.clone(),
+        icp_iterations: args.icp_iterations,
+        samples: args.refine_samples,
+        bijective: args.bijective,
+        adjoint: args.adjoint,
+        sinkhorn: args.conversion == ConversionKind::Sinkhorn,
+        mirrored: args.mirrored,
+    };
+    let r = fmaps::pipeline::named_refinement(kind, &options).map_err(zoomout_failure)?;
+    Ok((kind, r))
 }
 
-/// Whether meshes whose smaller one has `smallest` vertices can run the
-/// recommended refinement (its eigenpairs need more vertices).
-fn default_fits(smallest: usize) -> bool {
-    smallest > fmaps::pipeline::Refinement::recommended().k_needed()
+/// A refinement the options do not allow: bad input about --zoomout.
+pub(crate) fn zoomout_failure(e: fmaps::pipeline::MatchError) -> Failure {
+    input(anyhow::Error::new(e).context("--zoomout"))
 }
 
 /// The pipeline's parameters for the command line `args` (the library's
@@ -285,21 +223,15 @@ pub(crate) fn params_of(args: &MatchArgs, smallest: usize) -> Result<MatchParams
     params.adjoint = args.adjoint;
     params.orient_reversing = args.mirrored;
     params.area_normalize = !args.no_area_normalize;
-    params.refine = refinement(args, smallest)?;
+    let (kind, refine) = refinement(args, smallest)?;
+    params.refine = refine;
     params.starts = match args.starts.as_deref() {
         Some(text) => fmaps::pipeline::parse_starts(text)
             .map_err(|e| input(anyhow::anyhow!("--starts {e}")))?,
         // The default further starts, those the computed basis allows.
-        None if matches!(params.refine, fmaps::pipeline::Refinement::ZoomOut { .. })
-            || args.refine.is_some_and(|k| k.discrete_preset().is_some()) =>
-        {
-            let k_process = params.k_process.max(params.refine.k_needed());
-            fmaps::pipeline::ZOOMOUT_STARTS
-                .into_iter()
-                .filter(|&s| s <= k_process)
-                .collect()
+        None => {
+            fmaps::pipeline::default_starts(kind, params.k_process.max(params.refine.k_needed()))
         }
-        None => Vec::new(),
     };
     if args.restart_below.is_some() && params.starts.is_empty() {
         return Err(input(anyhow::anyhow!(
@@ -451,7 +383,8 @@ pub(crate) fn match_cmd(args: &MatchArgs) -> Result<(), Failure> {
     );
     if args.refine.is_none()
         && args.zoomout.is_none()
-        && !default_fits(a.n_vertices().min(b.n_vertices()))
+        && fmaps::pipeline::RefinerKind::default_for(a.n_vertices().min(b.n_vertices()))
+            == fmaps::pipeline::RefinerKind::None
     {
         outln!(
             o,
@@ -507,7 +440,7 @@ pub(crate) fn match_cmd(args: &MatchArgs) -> Result<(), Failure> {
 mod tests {
     use clap::Parser;
     use fmaps::pipeline::{MatchParams, Refinement, ZOOMOUT_STARTS};
-    use fmaps::refine::{Icp, ZoomOut};
+    use fmaps::refine::Icp;
 
     use super::params_of;
     use crate::{Cli, Command};
@@ -572,7 +505,7 @@ mod tests {
                 starts,
                 ..
             } => {
-                let z = ZoomOut::default();
+                let z = fmaps::refine::ZoomOut::default();
                 assert_eq!(
                     (zoomout.k_start, zoomout.k_final, zoomout.step),
                     (z.k_start, z.k_final, z.step)

@@ -3,7 +3,7 @@
 use super::*;
 
 use fmaps::pipeline::{MatchParams, Refinement};
-use fmaps::refine::{Icp, ZoomOut};
+use fmaps::refine::Icp;
 
 use crate::match_cmd::{RefineKind, match_failure};
 
@@ -59,49 +59,18 @@ pub(crate) struct RefineArgs {
 }
 
 fn refinement(args: &RefineArgs) -> Result<Refinement, Failure> {
-    if let Some(preset) = args.refine.discrete_preset() {
-        return crate::match_cmd::discrete_refinement(
-            preset,
-            args.zoomout.as_deref(),
-            args.k,
-            args.conversion,
-        );
-    }
-    Ok(match args.refine {
-        RefineKind::None => Refinement::None,
-        RefineKind::Bcicp => {
-            Refinement::Custom(std::sync::Arc::new(fmaps::refine::Repair::default()))
-        }
-        RefineKind::SmoothShells => {
-            Refinement::Custom(std::sync::Arc::new(fmaps::refine::SmoothShells::default()))
-        }
-        RefineKind::Icp => Refinement::Icp(Icp {
-            max_iterations: args.icp_iterations,
-            adjoint: args.adjoint,
-            sinkhorn: args.conversion.sinkhorn(),
-        }),
-        RefineKind::Zoomout | RefineKind::BijectiveZoomout | RefineKind::Discrete => {
-            let mut z = match &args.zoomout {
-                None => ZoomOut::default(),
-                Some(text) => ZoomOut::with_schedule(text)
-                    .map_err(|e| input(anyhow::anyhow!("--zoomout: {e}")))?,
-            };
-            if z.k_start > args.k {
-                return Err(input(anyhow::anyhow!(
-                    "--zoomout starts at {}, but the map's C is only {k} x {k} (--k {k})",
-                    z.k_start,
-                    k = args.k
-                )));
-            }
-            z.adjoint = args.adjoint;
-            z.bijective = args.bijective;
-            z.sinkhorn = args.conversion.sinkhorn();
-            Refinement::ZoomOut {
-                zoomout: z,
-                samples: args.refine_samples,
-            }
-        }
-    })
+    let options = fmaps::pipeline::RefineOptions {
+        k: args.k,
+        schedule: args.zoomout.clone(),
+        icp_iterations: args.icp_iterations,
+        samples: args.refine_samples,
+        bijective: args.bijective,
+        adjoint: args.adjoint,
+        sinkhorn: args.conversion == crate::match_cmd::ConversionKind::Sinkhorn,
+        mirrored: false,
+    };
+    fmaps::pipeline::named_refinement(args.refine.kind(), &options)
+        .map_err(crate::match_cmd::zoomout_failure)
 }
 
 pub(crate) fn refine_cmd(args: &RefineArgs) -> Result<(), Failure> {

@@ -658,7 +658,7 @@ fn refine_repairs_a_given_map() {
         ),
         (
             vec!["--init-map", "init.map", "--k", "20"],
-            "--zoomout starts at 50",
+            "schedule starts at 50",
         ),
     ] {
         let out = fmaps()

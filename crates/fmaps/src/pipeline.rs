@@ -36,18 +36,22 @@ pub use fmaps_descriptors::DescriptorKind;
 use fmaps_eigensolve::SpectralBasis;
 use fmaps_mesh_io::TriMesh;
 use fmaps_refine::{self as refine, RefineReport, Refiner};
-use fmaps_solve::{self as solve, EnergyParams, ShapeData, build_energy};
+use fmaps_solve::{self as solve, EnergyParams, ShapeData};
 use nalgebra::DMatrix;
 
 use crate::{SpectrumParams, spectrum};
 
+mod fit;
 mod from_map;
 mod guards;
+mod named;
 mod starts;
+pub use fit::{Fit, fit_descriptors};
 use from_map::with_refiner;
 pub use from_map::{RefinedMap, refine_point_map};
 pub use guards::parse_starts;
-use guards::{check_determined, unit_area};
+use guards::unit_area;
+pub use named::{RefineOptions, RefinerKind, default_starts, named_refinement};
 use starts::multi_start;
 
 /// Errors of the pipeline, naming the stage.
@@ -670,33 +674,13 @@ pub fn match_prepared(
         || shape_descriptors(b, &lm_b, params),
     );
     let (da, db) = (da?, db?);
-    // The energy only sees the span of the descriptors: drop the directions
-    // below rounding level (exact to rounding, ~3x fewer operators).
-    let (da, db) = if params.compress {
-        solve::compress_descriptors(&da, &a.basis.mass, &db, &b.basis.mass, 1e-15)?
-    } else {
-        (da, db)
-    };
-    // The map solved for is C_BA: source of C is B, target A.
-    let (sb, sa) = (b.basis.truncate(k), a.basis.truncate(k));
     times.descriptors = t.elapsed().as_secs_f64();
-
-    let t = Instant::now();
-    let mut energy = build_energy(
-        &shape_data(b, &sb),
-        &shape_data(a, &sa),
-        &db,
-        &da,
-        &energy_params(params),
-    )?;
-    times.operators = t.elapsed().as_secs_f64();
-    let t = Instant::now();
-    solve::normalize_weights(&mut energy, params.weights());
-    let c_ba = energy.minimize()?;
-    check_determined(&c_ba, a.area, b.area)?;
-    let energy_terms = energy.terms(&c_ba);
-    let energy_value = energy.weighted_sum(&energy_terms);
-    times.solve = t.elapsed().as_secs_f64();
+    let fit = fit_descriptors(a, b, &da, &db, params)?;
+    times.descriptors += fit.times.descriptors;
+    times.operators = fit.times.operators;
+    times.solve = fit.times.solve;
+    let (c_ba, energy_terms, energy_value) = (fit.c_ba, fit.energy_terms, fit.energy);
+    let (sb, sa) = (b.basis.truncate(k), a.basis.truncate(k));
 
     let t = Instant::now();
     let t_ab = if params.adjoint {

@@ -22,11 +22,13 @@
 //! GIL-free runner, and each is a thin call into the facade.)
 #![deny(unsafe_code)]
 
+mod stages;
+
 use std::path::PathBuf;
 use std::sync::Arc;
 
 use fmaps::mesh_io::TriMesh;
-use fmaps::pipeline::{MatchParams, Refinement};
+use fmaps::pipeline::{MatchParams, RefineOptions, RefinerKind, default_starts, named_refinement};
 use nalgebra::DMatrix;
 use numpy::ndarray::{Array1, Array2, ShapeBuilder};
 use numpy::{IntoPyArray, PyArray1, PyArray2, PyReadonlyArray1, PyReadonlyArray2};
@@ -205,10 +207,14 @@ fn fortran(m: DMatrix<f64>) -> Array2<f64> {
 }
 
 /// The pipeline's parameters for `refine` (the names of `fmaps match
-/// --refine`, or "default": Smooth Shells where both meshes have enough
-/// vertices for its basis, else none, as `fmaps match` without flags).
+/// --refine`, or "default": what `fmaps match` runs without flags, the
+/// facade's [`RefinerKind::default_for`]) on the schedule `schedule`
+/// (`START:FINAL:STEP`, None: 50:150:5) where the refiner has one, from the
+/// further starts `fmaps match` uses for that refiner.
+#[allow(clippy::too_many_arguments)]
 fn params_for(
     refine: &str,
+    schedule: Option<String>,
     smallest: usize,
     k: usize,
     k_process: usize,
@@ -227,33 +233,28 @@ fn params_for(
     if let Some(w) = w_orient {
         p.w_orient = w;
     }
-    let shells = || {
-        Refinement::Custom(Arc::new(fmaps::refine::SmoothShells {
-            reflect: mirrored,
-            ..Default::default()
-        }))
+    let kind = refiner_kind(refine, smallest)?;
+    let options = RefineOptions {
+        k,
+        schedule,
+        mirrored,
+        ..RefineOptions::default()
     };
-    p.refine = match refine {
-        "default" if smallest > Refinement::recommended().k_needed() => shells(),
-        "default" | "none" => Refinement::None,
-        "smooth-shells" => shells(),
-        "icp" => Refinement::Icp(fmaps::refine::Icp::default()),
-        "zoomout" => {
-            let z = Refinement::default_zoomout();
-            let most = k_process.max(z.k_needed());
-            p.starts = fmaps::pipeline::ZOOMOUT_STARTS
-                .into_iter()
-                .filter(|&s| s <= most)
-                .collect();
-            z
-        }
-        other => {
-            return Err(err(format!(
-                "refine = {other:?}: expected \"default\", \"smooth-shells\", \"zoomout\", \"icp\" or \"none\""
-            )));
-        }
-    };
+    p.refine =
+        named_refinement(kind, &options).map_err(|e| err(format!("refine = {refine:?}: {e}")))?;
+    p.starts = default_starts(kind, k_process.max(p.refine.k_needed()));
     Ok(p)
+}
+
+/// The refinement named `refine` ("default": the facade's choice for
+/// meshes whose smaller one has `smallest` vertices).
+fn refiner_kind(refine: &str, smallest: usize) -> PyResult<RefinerKind> {
+    match refine {
+        "default" => Ok(RefinerKind::default_for(smallest)),
+        name => name
+            .parse()
+            .map_err(|e| err(format!("refine = {refine:?}: {e} or \"default\""))),
+    }
 }
 
 /// The result of [`match_shapes`].
@@ -302,7 +303,7 @@ fn indices(py: Python<'_>, v: &[usize]) -> Py<PyArray1<i64>> {
 /// defaults and the same maps for the same options, on any number of
 /// threads).
 #[pyfunction]
-#[pyo3(signature = (a, b, *, refine = "default", k = 50, k_process = 200, w_orient = None, mirrored = false, area_normalize = true, starts = None, threads = None))]
+#[pyo3(signature = (a, b, *, refine = "default", k = 50, k_process = 200, schedule = None, w_orient = None, mirrored = false, area_normalize = true, starts = None, threads = None))]
 #[allow(clippy::too_many_arguments)]
 fn match_shapes(
     py: Python<'_>,
@@ -311,6 +312,7 @@ fn match_shapes(
     refine: &str,
     k: usize,
     k_process: usize,
+    schedule: Option<String>,
     w_orient: Option<f64>,
     mirrored: bool,
     area_normalize: bool,
@@ -321,6 +323,7 @@ fn match_shapes(
     let smallest = ma.n_vertices().min(mb.n_vertices());
     let mut params = params_for(
         refine,
+        schedule,
         smallest,
         k,
         k_process,
@@ -332,6 +335,8 @@ fn match_shapes(
         // Further initial sizes (`[]`: one start, as pyFM runs ZoomOut).
         params.starts = s;
     }
+    // The refinement's eigenpairs are computed, as `fmaps match` does.
+    params.k_process = params.k_process.max(params.refine.k_needed());
     let (r, quality) = run(py, threads, move || {
         let r = fmaps::match_shapes(&ma, &mb, &params).map_err(|e| e.to_string())?;
         let q = fmaps::eval::map_quality(&r.t_ab, &ma, &mb, None).map_err(|e| e.to_string())?;
@@ -413,6 +418,47 @@ impl PreparedShape {
     #[getter]
     fn seconds(&self) -> f64 {
         self.inner.seconds
+    }
+
+    /// Its eigenvalues (k_process,).
+    #[getter]
+    fn eigenvalues<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
+        self.inner
+            .basis
+            .eigenvalues
+            .as_slice()
+            .to_vec()
+            .into_pyarray(py)
+    }
+
+    /// Its eigenbasis (n x k_process, Fortran order, orthonormal in the
+    /// mass; a copy).
+    #[getter]
+    fn basis<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> {
+        fortran(self.inner.basis.eigenvectors.clone()).into_pyarray(py)
+    }
+
+    /// Its lumped mass (n,).
+    #[getter]
+    fn mass<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
+        self.inner.basis.mass.as_slice().to_vec().into_pyarray(py)
+    }
+
+    /// The mesh as prepared (scaled to unit area unless `area_normalize`
+    /// was off).
+    #[getter]
+    fn mesh(&self) -> PyResult<Mesh> {
+        let p = &self.inner;
+        Ok(Mesh {
+            inner: Arc::new(TriMesh::new(p.vertices.clone(), p.faces.clone()).map_err(err)?),
+        })
+    }
+
+    /// The input mesh's area (the prepared one has area 1 unless
+    /// `area_normalize` was off).
+    #[getter]
+    fn input_area(&self) -> f64 {
+        self.inner.input_area
     }
 
     fn __repr__(&self) -> String {
@@ -533,7 +579,7 @@ fn prepare(
 /// `area_normalize` are the shapes'). Quality scores are computed on the
 /// prepared (unit-area) meshes.
 #[pyfunction]
-#[pyo3(signature = (a, b, *, refine = "default", k = 50, w_orient = None, mirrored = false, starts = None, threads = None))]
+#[pyo3(signature = (a, b, *, refine = "default", k = 50, schedule = None, w_orient = None, mirrored = false, starts = None, threads = None))]
 #[allow(clippy::too_many_arguments)]
 fn match_prepared(
     py: Python<'_>,
@@ -541,6 +587,7 @@ fn match_prepared(
     b: &PreparedShape,
     refine: &str,
     k: usize,
+    schedule: Option<String>,
     w_orient: Option<f64>,
     mirrored: bool,
     starts: Option<Vec<usize>>,
@@ -556,6 +603,7 @@ fn match_prepared(
     let smallest = pa.vertices.len().min(pb.vertices.len());
     let mut params = params_for(
         refine,
+        schedule,
         smallest,
         k,
         k_process,
@@ -639,7 +687,6 @@ fn evaluate<'py>(
     geodesic: &str,
     threads: Option<usize>,
 ) -> PyResult<Bound<'py, PyDict>> {
-    use fmaps::geodesic::{DijkstraSolver, DistanceSolver, ExactSolver, HeatParams, HeatSolver};
     let (na, nb) = (a.inner.n_vertices(), b.inner.n_vertices());
     let t_ab = map_between(&map_ab, a, b)?;
     let gt = fmaps::eval::GroundTruth::new(
@@ -654,18 +701,7 @@ fn evaluate<'py>(
     let mb = Arc::clone(&b.inner);
     let method = geodesic.to_string();
     let report = run(py, threads, move || {
-        let solver: Box<dyn DistanceSolver> = match method.as_str() {
-            "exact" => Box::new(ExactSolver::new(&mb).map_err(|e| e.to_string())?),
-            "heat" => {
-                Box::new(HeatSolver::new(&mb, &HeatParams::default()).map_err(|e| e.to_string())?)
-            }
-            "dijkstra" => Box::new(DijkstraSolver::new(&mb)),
-            other => {
-                return Err(format!(
-                    "geodesic = {other:?}: expected \"exact\", \"heat\" or \"dijkstra\""
-                ));
-            }
-        };
+        let solver = stages::distance_solver(&method, &mb)?;
         fmaps::eval::evaluate(
             &mb,
             solver.as_ref(),
@@ -824,6 +860,7 @@ fn _fmaps(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(evaluate, m)?)?;
     m.add_function(wrap_pyfunction!(read_indices, m)?)?;
     m.add_function(wrap_pyfunction!(demo_pairs, m)?)?;
+    stages::register(m)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     Ok(())
 }

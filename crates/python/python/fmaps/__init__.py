@@ -17,6 +17,12 @@ the message the ``fmaps`` command prints.
 A shape's eigenbasis can be computed once (:func:`prepare`) and matched
 against many (:func:`match_prepared`); :mod:`fmaps.distributed` does that
 for whole collections on a Ray cluster.
+
+The stages one by one, on prepared shapes (pyFM's preprocess / fit /
+get_p2p / icp_refine / zoomout_refine): :func:`descriptors`, :func:`fit`
+(also on your own per-vertex features), :func:`fmap_to_map`,
+:func:`map_to_fmap`, :func:`refine` (every refiner, from any map), and
+:func:`geodesics` (exact, heat or Dijkstra).
 """
 
 from ._fmaps import (
@@ -24,14 +30,21 @@ from ._fmaps import (
     MatchResult,
     Mesh,
     PreparedShape,
+    RefinedMap,
     __version__,
     demo_pairs,
+    descriptors,
     evaluate,
+    fit,
+    fmap_to_map,
     generated_body,
+    geodesics,
+    map_to_fmap,
     match_prepared,
     match_shapes,
     prepare,
     read_indices,
+    refine,
     render_transfer,
     spectrum,
 )
@@ -41,14 +54,21 @@ __all__ = [
     "MatchResult",
     "Mesh",
     "PreparedShape",
+    "RefinedMap",
     "__version__",
     "demo_pairs",
+    "descriptors",
     "evaluate",
+    "fit",
+    "fmap_to_map",
     "generated_body",
+    "geodesics",
+    "map_to_fmap",
     "match_prepared",
     "match_shapes",
     "prepare",
     "read_indices",
+    "refine",
     "render_transfer",
     "spectrum",
 ]

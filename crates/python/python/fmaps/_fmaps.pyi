@@ -40,6 +40,18 @@ class PreparedShape:
     def n_vertices(self) -> int: ...
     @property
     def seconds(self) -> float: ...
+    @property
+    def eigenvalues(self) -> npt.NDArray[np.float64]: ...
+    @property
+    def basis(self) -> npt.NDArray[np.float64]:
+        """n x k_process, Fortran order, orthonormal in the mass (a copy)."""
+    @property
+    def mass(self) -> npt.NDArray[np.float64]: ...
+    @property
+    def mesh(self) -> Mesh:
+        """The mesh as prepared (unit area unless area_normalize was off)."""
+    @property
+    def input_area(self) -> float: ...
 
 class MatchResult:
     """The result of :func:`match_shapes`."""
@@ -73,14 +85,16 @@ def match_shapes(
     refine: str = "default",
     k: int = 50,
     k_process: int = 200,
+    schedule: Optional[str] = None,
     w_orient: Optional[float] = None,
     mirrored: bool = False,
     area_normalize: bool = True,
     starts: Optional[list] = None,
     threads: Optional[int] = None,
 ) -> MatchResult:
-    """The pipeline of `fmaps match`; refine: "default" (Smooth Shells), "smooth-shells", "zoomout", "icp", "none";
-    starts: further initial sizes ([] = one start; None = the CLI's default)."""
+    """The pipeline of `fmaps match`; refine: "default" (Smooth Shells), or a name of `fmaps match --refine`:
+    "none", "icp", "zoomout", "bijective-zoomout", "discrete", "bcicp", "smooth-shells"; schedule: "START:FINAL:STEP"
+    for ZoomOut and the discrete presets; starts: further initial sizes ([] = one start; None = the CLI's default)."""
 
 def prepare(
     mesh: Mesh, *, k_process: int = 200, area_normalize: bool = True, threads: Optional[int] = None
@@ -93,12 +107,94 @@ def match_prepared(
     *,
     refine: str = "default",
     k: int = 50,
+    schedule: Optional[str] = None,
     w_orient: Optional[float] = None,
     mirrored: bool = False,
     starts: Optional[list] = None,
     threads: Optional[int] = None,
 ) -> MatchResult:
     """`match_shapes` on prepared shapes (the same maps)."""
+
+class RefinedMap:
+    """The result of :func:`refine`."""
+
+    map_ab: npt.NDArray[np.int64]
+    """The refined map: for each vertex of A, a vertex of B (0-based)."""
+    c_ba: npt.NDArray[np.float64]
+    """C_BA after refinement."""
+    c_ba_init: npt.NDArray[np.float64]
+    """The given map's k x k pull-back, where the refiner started."""
+    orientation_init: float
+    orientation: float
+    refiner: str
+    seconds_per_iteration: list
+    seconds: float
+
+def descriptors(
+    shape: PreparedShape,
+    *,
+    kind: str = "wks",
+    n: int = 100,
+    k: int = 128,
+    landmarks: Optional[npt.ArrayLike] = None,
+    subsample: int = 1,
+) -> npt.NDArray[np.float64]:
+    """The pipeline's descriptors (n_vertices x p, unit L2 columns): "wks" or "hks" at n samples on k eigenpairs,
+    then the landmark variant (0-based vertices) stacked; every subsample-th column."""
+
+def fit(
+    a: PreparedShape,
+    b: PreparedShape,
+    *,
+    k: int = 50,
+    descr_a: Optional[npt.ArrayLike] = None,
+    descr_b: Optional[npt.ArrayLike] = None,
+    kind: str = "wks",
+    n: int = 100,
+    k_descr: int = 128,
+    landmarks: Optional[list] = None,
+    w_orient: Optional[float] = None,
+    mirrored: bool = False,
+    threads: Optional[int] = None,
+) -> npt.NDArray[np.float64]:
+    """The functional-map solve: C_BA (k x k) from the pipeline's descriptors, or from descr_a / descr_b
+    (any per-vertex features with corresponding columns); landmarks: (vertex of A, vertex of B) pairs."""
+
+def fmap_to_map(
+    c_ba: npt.ArrayLike, a: PreparedShape, b: PreparedShape, *, adjoint: bool = False, threads: Optional[int] = None
+) -> npt.NDArray[np.int64]:
+    """map_ab from C_BA (k_A x k_B): exact nearest neighbours of the spectral embeddings (pyFM's get_p2p)."""
+
+def map_to_fmap(map_ab: npt.ArrayLike, a: PreparedShape, b: PreparedShape, *, k: int = 50) -> npt.NDArray[np.float64]:
+    """C_BA = Phi_A^T M_A Pi_AB Phi_B (k x k), the pull-back along map_ab."""
+
+def refine(
+    a: PreparedShape,
+    b: PreparedShape,
+    map_ab: npt.ArrayLike,
+    *,
+    method: str = "zoomout",
+    k: int = 50,
+    schedule: Optional[str] = None,
+    icp_iterations: Optional[int] = None,
+    bijective: bool = False,
+    adjoint: bool = False,
+    sinkhorn: bool = False,
+    mirrored: bool = False,
+    threads: Optional[int] = None,
+) -> RefinedMap:
+    """Refines any map A -> B: "zoomout", "icp", "bijective-zoomout", "discrete", "bcicp", "smooth-shells", "none"."""
+
+def geodesics(
+    mesh: Mesh,
+    sources: npt.ArrayLike,
+    *,
+    method: str = "exact",
+    per_source: bool = False,
+    threads: Optional[int] = None,
+) -> npt.NDArray[np.float64]:
+    """Distances from the nearest source to every vertex (n,), or one row per source (len(sources) x n);
+    method "exact", "heat" or "dijkstra"."""
 
 def generated_body(individual: int, pose: int) -> Mesh:
     """Shape body_{individual}_{pose} of the generated body collection."""
