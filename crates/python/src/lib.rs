@@ -43,6 +43,10 @@ pyo3::create_exception!(
     "Bad input or a failed computation; the message is the one `fmaps` prints."
 );
 
+/// Vertex indices from Python: an int64 array or any sequence of integers
+/// (a list converts; floats do not).
+type Indices<'py> = numpy::PyArrayLike1<'py, i64>;
+
 /// The error of a fmaps call, with its causes (as the CLI prints them).
 fn err(e: impl std::fmt::Display) -> PyErr {
     FmapsError::new_err(e.to_string())
@@ -680,10 +684,10 @@ fn evaluate<'py>(
     py: Python<'py>,
     a: &Mesh,
     b: &Mesh,
-    map_ab: PyReadonlyArray1<'_, i64>,
-    gt_a: PyReadonlyArray1<'_, i64>,
-    gt_b: PyReadonlyArray1<'_, i64>,
-    gt_b_sym: Option<PyReadonlyArray1<'_, i64>>,
+    map_ab: Indices<'_>,
+    gt_a: Indices<'_>,
+    gt_b: Indices<'_>,
+    gt_b_sym: Option<Indices<'_>>,
     geodesic: &str,
     threads: Option<usize>,
 ) -> PyResult<Bound<'py, PyDict>> {
@@ -790,7 +794,7 @@ fn render_transfer(
     py: Python<'_>,
     a: &Mesh,
     b: &Mesh,
-    map_ab: PyReadonlyArray1<'_, i64>,
+    map_ab: Indices<'_>,
     path: PathBuf,
     kind: &str,
     up: &str,

@@ -16,7 +16,7 @@ use numpy::ndarray::Array2;
 use numpy::{IntoPyArray, PyArray1, PyArray2, PyReadonlyArray1, PyReadonlyArray2};
 use pyo3::prelude::*;
 
-use crate::{Mesh, PreparedShape, checked, err, fortran, indices, refiner_kind, run};
+use crate::{Indices, Mesh, PreparedShape, checked, err, fortran, indices, refiner_kind, run};
 
 /// A numpy matrix (any layout) as a column-major matrix, checked finite.
 fn matrix(m: &PyReadonlyArray2<'_, f64>, what: &str) -> PyResult<DMatrix<f64>> {
@@ -78,7 +78,7 @@ fn descriptors<'py>(
     kind: &str,
     n: usize,
     k: usize,
-    landmarks: Option<PyReadonlyArray1<'_, i64>>,
+    landmarks: Option<Indices<'_>>,
     subsample: usize,
 ) -> PyResult<Bound<'py, PyArray2<f64>>> {
     let p = descriptor_params(kind, n, k, subsample)?;
@@ -223,7 +223,7 @@ fn fmap_to_map<'py>(
 #[pyo3(signature = (map_ab, a, b, *, k = 50))]
 fn map_to_fmap<'py>(
     py: Python<'py>,
-    map_ab: PyReadonlyArray1<'_, i64>,
+    map_ab: Indices<'_>,
     a: &PreparedShape,
     b: &PreparedShape,
     k: usize,
@@ -307,7 +307,7 @@ fn refine(
     py: Python<'_>,
     a: &PreparedShape,
     b: &PreparedShape,
-    map_ab: PyReadonlyArray1<'_, i64>,
+    map_ab: Indices<'_>,
     method: &str,
     k: usize,
     schedule: Option<String>,
@@ -398,7 +398,7 @@ pub(crate) fn distance_solver(
 fn geodesics<'py>(
     py: Python<'py>,
     mesh: &Mesh,
-    sources: PyReadonlyArray1<'_, i64>,
+    sources: Indices<'_>,
     method: &str,
     per_source: bool,
     threads: Option<usize>,

@@ -107,6 +107,11 @@ def test_exact_geodesics_on_a_plane_are_euclidean():
         assert np.allclose(row, np.linalg.norm(v - v[s], axis=1), atol=1e-12)
     nearest = fmaps.geodesics(m, src)
     assert np.allclose(nearest, fields.min(axis=0), atol=1e-12)
+    # Indices as a list or int32 convert; floats do not.
+    assert np.array_equal(fmaps.geodesics(m, [0, 77]), nearest)
+    assert np.array_equal(fmaps.geodesics(m, src.astype(np.int32)), nearest)
+    with pytest.raises(TypeError):
+        fmaps.geodesics(m, [0.5])
     # Dijkstra runs along edges: never shorter.
     assert np.all(fmaps.geodesics(m, src, method="dijkstra") >= nearest - 1e-12)
 
