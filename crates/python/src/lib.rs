@@ -350,6 +350,23 @@ fn match_shapes(
     result(py, r, quality)
 }
 
+/// The scores of [`fmaps::eval::map_quality`] as a dict.
+fn quality_dict<'py>(
+    py: Python<'py>,
+    quality: &fmaps::eval::MapQuality,
+) -> PyResult<Bound<'py, PyDict>> {
+    let q = PyDict::new(py);
+    q.set_item("coverage", quality.coverage)?;
+    q.set_item("area_coverage", quality.area_coverage)?;
+    q.set_item("collapsed_faces", quality.collapsed_faces)?;
+    q.set_item("area_distortion", quality.area_distortion)?;
+    q.set_item("conformal_distortion", quality.conformal_distortion)?;
+    if let Some(r) = quality.round_trip {
+        q.set_item("round_trip", r)?;
+    }
+    Ok(q)
+}
+
 /// The Python result of a pipeline run and its quality scores.
 fn result(
     py: Python<'_>,
@@ -369,12 +386,7 @@ fn result(
     ] {
         times.set_item(name, v)?;
     }
-    let q = PyDict::new(py);
-    q.set_item("coverage", quality.coverage)?;
-    q.set_item("area_coverage", quality.area_coverage)?;
-    q.set_item("collapsed_faces", quality.collapsed_faces)?;
-    q.set_item("area_distortion", quality.area_distortion)?;
-    q.set_item("conformal_distortion", quality.conformal_distortion)?;
+    let q = quality_dict(py, &quality)?;
     let (refiner, seconds_per_iteration) = match &r.refine {
         Some(rep) => (
             rep.method.clone(),

@@ -433,6 +433,45 @@ fn geodesics<'py>(
     }
 }
 
+/// Scores of `map_ab` that need no ground truth (the ones `fmaps match
+/// --json` reports and multi-start selects by): coverage (share of B's
+/// vertices hit), area_coverage, collapsed_faces, area_distortion,
+/// conformal_distortion, orientation (near 1: orientation preserved, near
+/// −1: mirrored), and with `map_ba` round_trip (mean distance from x to
+/// `map_ba[map_ab[x]]` over √area(A)). Meshes as given (scale them to unit
+/// area to compare pairs).
+#[pyfunction]
+#[pyo3(signature = (a, b, map_ab, map_ba = None))]
+fn map_quality<'py>(
+    py: Python<'py>,
+    a: &Mesh,
+    b: &Mesh,
+    map_ab: Indices<'_>,
+    map_ba: Option<Indices<'_>>,
+) -> PyResult<Bound<'py, pyo3::types::PyDict>> {
+    let t_ab = crate::map_between(&map_ab, a, b)?;
+    let t_ba = map_ba.map(|m| crate::map_between(&m, b, a)).transpose()?;
+    let (ma, mb) = (Arc::clone(&a.inner), Arc::clone(&b.inner));
+    let (q, orientation) = py
+        .detach(move || {
+            let q = fmaps::eval::map_quality(&t_ab, &ma, &mb, t_ba.as_deref())
+                .map_err(|e| e.to_string())?;
+            let o = fmaps::refine::orientation_score(
+                &t_ab,
+                ma.vertices(),
+                ma.faces(),
+                mb.vertices(),
+                mb.faces(),
+            )
+            .map_err(|e| e.to_string())?;
+            Ok::<_, String>((q, o))
+        })
+        .map_err(err)?;
+    let d = crate::quality_dict(py, &q)?;
+    d.set_item("orientation", orientation)?;
+    Ok(d)
+}
+
 /// Adds this module's functions and classes to the extension module.
 pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<RefinedMap>()?;
@@ -442,5 +481,6 @@ pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(map_to_fmap, m)?)?;
     m.add_function(wrap_pyfunction!(refine, m)?)?;
     m.add_function(wrap_pyfunction!(geodesics, m)?)?;
+    m.add_function(wrap_pyfunction!(map_quality, m)?)?;
     Ok(())
 }

@@ -151,3 +151,20 @@ def test_bad_stage_input_raises(pair, call, says):
     with pytest.raises(fmaps.FmapsError, match=None) as e:
         call(a, b)
     assert says in str(e.value)
+
+
+def test_map_quality_of_the_identity_and_of_a_mirror_image(pair):
+    p, _, _ = pair
+    a = p["a"]
+    ident = np.arange(a.n_vertices)
+    q = fmaps.map_quality(a, a, ident, ident)
+    assert q["coverage"] == 1.0 and q["collapsed_faces"] == 0.0
+    assert abs(q["area_distortion"]) < 1e-12 and abs(q["conformal_distortion"]) < 1e-12
+    assert abs(q["orientation"] - 1.0) < 1e-12 and q["round_trip"] == 0.0
+    # A mirror image (x negated, triangles rewound so that normals point
+    # outwards again): the identity reverses orientation, every triangle
+    # keeps its area and shape.
+    mirrored = fmaps.Mesh(a.vertices * np.array([-1.0, 1.0, 1.0]), a.faces[:, ::-1].copy())
+    q = fmaps.map_quality(a, mirrored, ident)
+    assert abs(q["orientation"] + 1.0) < 1e-12
+    assert abs(q["area_distortion"]) < 1e-12

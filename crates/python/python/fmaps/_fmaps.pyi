@@ -229,3 +229,9 @@ def render_transfer(
     size: int = 480,
 ) -> Tuple[int, int]:
     """Draws the map as a PNG (source left, target right); kind "color" or "texture"."""
+
+def map_quality(
+    a: Mesh, b: Mesh, map_ab: npt.ArrayLike, map_ba: Optional[npt.ArrayLike] = None
+) -> dict:
+    """Scores without ground truth: coverage, area_coverage, collapsed_faces, area_distortion, conformal_distortion,
+    orientation (1 preserved, -1 mirrored), and with map_ba round_trip."""
