@@ -158,9 +158,13 @@ impl Shapes<'_> {
             return Ok(m.clone());
         }
         let path = mesh_path(&self.args.data, name, line, self.pairs_file)?;
+        // Read once: the bytes are both the cache key and the mesh.
+        let format = fmaps::mesh_io::Format::from_path(&path).map_err(input)?;
         let bytes =
             fmaps::mesh_io::read_bounded(&path, fmaps::mesh_io::MAX_INPUT_BYTES).map_err(input)?;
-        let mesh = Arc::new(load(&path)?);
+        let mesh = Arc::new(
+            fmaps::mesh_io::parse_mesh(&bytes, format).map_err(|e| input(e.with_path(&path)))?,
+        );
         let entry = (mesh, fnv64(&bytes));
         self.meshes.insert(name.to_string(), entry.clone());
         Ok(entry)

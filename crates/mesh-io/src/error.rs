@@ -138,8 +138,10 @@ pub enum MeshProblem {
 }
 
 impl Error {
-    /// Attaches a file path to an error produced while parsing bytes.
-    pub(crate) fn with_path(self, p: &Path) -> Self {
+    /// Attaches a file path to an error produced while parsing bytes (as
+    /// [`read_mesh`](crate::read_mesh) reports it), for callers that read
+    /// the file themselves and parse with [`parse_mesh`](crate::parse_mesh).
+    pub fn with_path(self, p: &Path) -> Self {
         match self {
             Error::Parse {
                 path: None,
