@@ -47,6 +47,12 @@
 //! # Ok::<(), fmaps_nn::Error>(())
 //! ```
 //!
+//! The kernels run at the widest instruction set the CPU has
+//! ([`simd_level`]); [`set_simd_cap`] or the environment variable
+//! `FMAPS_SIMD=baseline|avx2|avx512` caps it (to test or time the
+//! narrower kernels; the answers are the same), and `FMAPS_NO_AMX` turns
+//! the tiles off.
+//!
 //! This crate is also the one place of the workspace where CPU features
 //! are detected ([`cpu_features`]) and where `unsafe` code lives (the AMX
 //! tiles, the strided row view, the `#[target_feature]` kernels, among
@@ -75,7 +81,7 @@ use prefix::{PREFIX_FROM, PREFIX_MAX_ROWS, PrefixData, prefix_search};
 use rows::Rows;
 use tree::{LEAF_DATA, LEAF_QUERY, TREE_MAX_DIM, TreeData, tree_search};
 
-pub use cpu::{CpuFeatures, cpu_features};
+pub use cpu::{CpuFeatures, SimdLevel, cpu_features, set_simd_cap, simd_level};
 pub use knn::{KNN_MARGIN, KNearest, k_nearest_rows};
 pub use wedge::{Fan, wedge_sums};
 
