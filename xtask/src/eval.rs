@@ -336,7 +336,8 @@ fn refiner_method(refiner: &str) -> anyhow::Result<fmaps::pipeline::Refinement> 
 
 /// `smooth-shells[:KEY=VALUE,..]`: Smooth Shells with the defaults but the
 /// keys given (k_max, levels, samples, init_samples, proposals, finalists,
-/// signs, seed, rigid, orientations, input: 0 or 1 for rigid and input).
+/// signs, seed, rigid, orientations, input, screen: 0 or 1 for rigid and
+/// input).
 fn smooth_shells(spec: &str) -> anyhow::Result<fmaps::refine::SmoothShells> {
     let mut s = fmaps::refine::SmoothShells::default();
     let Some(list) = spec.strip_prefix("smooth-shells:") else {
@@ -362,8 +363,9 @@ fn smooth_shells(spec: &str) -> anyhow::Result<fmaps::refine::SmoothShells> {
             "rigid" => s.rigid = n != 0,
             "orientations" => s.orientations = u,
             "input" => s.use_input_map = n != 0,
+            "screen" => s.screen = u,
             _ => bail!(
-                "{spec}: unknown key '{k}' (k_max, levels, samples, init_samples, proposals, finalists, signs, seed, rigid, orientations, input)"
+                "{spec}: unknown key '{k}' (k_max, levels, samples, init_samples, proposals, finalists, signs, seed, rigid, orientations, input, screen)"
             ),
         }
     }

@@ -630,6 +630,19 @@ fn smooth_shells_finds_the_identity_and_a_rotated_renumbered_copy() {
         "{right} of {n} vertices right"
     );
     assert_eq!(r.c_ab.shape(), (49, 49));
+    // Screening all eight rigid orientations finds it as well.
+    let screened = fmaps_refine::SmoothShells {
+        screen: 8,
+        ..shells()
+    };
+    let r = screened
+        .refine_with_geometry(&id, &ba, &bb, geometry(&a), geometry(&b))
+        .unwrap();
+    let right = r.t_ba.iter().zip(&perm).filter(|(x, y)| x == y).count();
+    assert!(
+        right as f64 > 0.99 * n as f64,
+        "screened: {right} of {n} vertices right"
+    );
     // It needs the geometry, bases large enough for its shells, geometry
     // that belongs to the bases.
     assert!(shells().refine(&id, &ba, &bb).is_err());
