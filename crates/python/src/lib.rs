@@ -307,7 +307,7 @@ fn indices(py: Python<'_>, v: &[usize]) -> Py<PyArray1<i64>> {
 /// defaults and the same maps for the same options, on any number of
 /// threads).
 #[pyfunction]
-#[pyo3(signature = (a, b, *, refine = "default", k = 50, k_process = 200, schedule = None, w_orient = None, mirrored = false, area_normalize = true, starts = None, threads = None))]
+#[pyo3(signature = (a, b, *, refine = "default", k = 50, k_process = 200, schedule = None, landmarks = None, w_orient = None, mirrored = false, area_normalize = true, starts = None, threads = None))]
 #[allow(clippy::too_many_arguments)]
 fn match_shapes(
     py: Python<'_>,
@@ -317,6 +317,7 @@ fn match_shapes(
     k: usize,
     k_process: usize,
     schedule: Option<String>,
+    landmarks: Option<Vec<(i64, i64)>>,
     w_orient: Option<f64>,
     mirrored: bool,
     area_normalize: bool,
@@ -324,6 +325,7 @@ fn match_shapes(
     threads: Option<usize>,
 ) -> PyResult<MatchResult> {
     let (ma, mb) = (Arc::clone(&a.inner), Arc::clone(&b.inner));
+    let landmarks = stages::landmark_pairs(landmarks, ma.n_vertices(), mb.n_vertices())?;
     let smallest = ma.n_vertices().min(mb.n_vertices());
     let mut params = params_for(
         refine,
@@ -341,6 +343,7 @@ fn match_shapes(
     }
     // The refinement's eigenpairs are computed, as `fmaps match` does.
     params.k_process = params.k_process.max(params.refine.k_needed());
+    params.landmarks = landmarks;
     let (r, quality) = run(py, threads, move || {
         let r = fmaps::match_shapes(&ma, &mb, &params).map_err(|e| e.to_string())?;
         let q = fmaps::eval::map_quality(&r.t_ab, &ma, &mb, None).map_err(|e| e.to_string())?;
@@ -595,7 +598,7 @@ fn prepare(
 /// `area_normalize` are the shapes'). Quality scores are computed on the
 /// prepared (unit-area) meshes.
 #[pyfunction]
-#[pyo3(signature = (a, b, *, refine = "default", k = 50, schedule = None, w_orient = None, mirrored = false, starts = None, threads = None))]
+#[pyo3(signature = (a, b, *, refine = "default", k = 50, schedule = None, landmarks = None, w_orient = None, mirrored = false, starts = None, threads = None))]
 #[allow(clippy::too_many_arguments)]
 fn match_prepared(
     py: Python<'_>,
@@ -604,11 +607,13 @@ fn match_prepared(
     refine: &str,
     k: usize,
     schedule: Option<String>,
+    landmarks: Option<Vec<(i64, i64)>>,
     w_orient: Option<f64>,
     mirrored: bool,
     starts: Option<Vec<usize>>,
     threads: Option<usize>,
 ) -> PyResult<MatchResult> {
+    let landmarks = stages::landmark_pairs(landmarks, a.n_vertices(), b.n_vertices())?;
     if a.area_normalize != b.area_normalize {
         return Err(err(
             "the two shapes were prepared with different area_normalize settings",
@@ -630,6 +635,7 @@ fn match_prepared(
     if let Some(s) = starts {
         params.starts = s;
     }
+    params.landmarks = landmarks;
     let (r, quality) = run(py, threads, move || {
         let r = fmaps::pipeline::match_prepared(&pa, &pb, &params).map_err(|e| e.to_string())?;
         let mesh = |p: &fmaps::pipeline::PreparedShape| {

@@ -27,13 +27,13 @@ fn matrix(m: &PyReadonlyArray2<'_, f64>, what: &str) -> PyResult<DMatrix<f64>> {
     Ok(DMatrix::from_fn(a.nrows(), a.ncols(), |i, j| a[(i, j)]))
 }
 
-/// Landmark pairs (vertex of A, vertex of B), checked against both shapes.
-fn landmark_pairs(
+/// Landmark pairs (vertex of A, vertex of B), checked against shapes of
+/// `na` and `nb` vertices.
+pub(crate) fn landmark_pairs(
     landmarks: Option<Vec<(i64, i64)>>,
-    a: &PreparedShape,
-    b: &PreparedShape,
+    na: usize,
+    nb: usize,
 ) -> PyResult<Vec<(usize, usize)>> {
-    let (na, nb) = (a.inner.basis.n(), b.inner.basis.n());
     landmarks
         .unwrap_or_default()
         .into_iter()
@@ -132,7 +132,7 @@ fn fit<'py>(
     if let Some(w) = w_orient {
         params.w_orient = w;
     }
-    params.landmarks = landmark_pairs(landmarks, a, b)?;
+    params.landmarks = landmark_pairs(landmarks, a.inner.basis.n(), b.inner.basis.n())?;
     let given = match (&descr_a, &descr_b) {
         (Some(x), Some(y)) => {
             if !params.landmarks.is_empty() {

@@ -85,6 +85,29 @@ def test_refine_gives_the_cli_refine_map(pair, tmp_path):
     assert np.array_equal(got.map_ab, want)
 
 
+def test_landmarks_give_the_cli_map(pair, tmp_path):
+    p, _, _ = pair
+    p["a"].save(tmp_path / "a.off")
+    p["b"].save(tmp_path / "b.off")
+    pairs = [(int(p["gt_a"][i]), int(p["gt_b"][i])) for i in (0, 100, 300)]
+    (tmp_path / "lm.txt").write_text("".join(f"{x + 1} {y + 1}\n" for x, y in pairs))
+    subprocess.run(
+        [cli(), "--threads", "2", "match", str(tmp_path / "a.off"), str(tmp_path / "b.off"), "--landmarks",
+         str(tmp_path / "lm.txt"), "--refine", "none", "--out", str(tmp_path / "ab.map")],
+        check=True,
+        capture_output=True,
+    )
+    want = fmaps.read_indices(tmp_path / "ab.map")
+    got = fmaps.match_shapes(fmaps.Mesh.load(tmp_path / "a.off"), fmaps.Mesh.load(tmp_path / "b.off"),
+                             refine="none", landmarks=pairs, threads=2)
+    assert np.array_equal(got.map_ab, want)
+    plain = fmaps.match_shapes(fmaps.Mesh.load(tmp_path / "a.off"), fmaps.Mesh.load(tmp_path / "b.off"),
+                               refine="none", threads=2)
+    assert not np.array_equal(plain.map_ab, want)  # the landmarks were used
+    with pytest.raises(fmaps.FmapsError, match="landmarks: pair 0"):
+        fmaps.match_shapes(p["a"], p["b"], landmarks=[(-1, 0)])
+
+
 def grid(n):
     """A flat n x n grid of the unit square, two triangles per cell."""
     xs = np.linspace(0.0, 1.0, n)

@@ -86,6 +86,7 @@ def match_shapes(
     k: int = 50,
     k_process: int = 200,
     schedule: Optional[str] = None,
+    landmarks: Optional[list] = None,
     w_orient: Optional[float] = None,
     mirrored: bool = False,
     area_normalize: bool = True,
@@ -94,7 +95,7 @@ def match_shapes(
 ) -> MatchResult:
     """The pipeline of `fmaps match`; refine: "default" (Smooth Shells), or a name of `fmaps match --refine`:
     "none", "icp", "zoomout", "bijective-zoomout", "discrete", "bcicp", "smooth-shells"; schedule: "START:FINAL:STEP"
-    for ZoomOut and the discrete presets; starts: further initial sizes ([] = one start; None = the CLI's default)."""
+    for ZoomOut and the discrete presets; landmarks: (vertex of A, vertex of B) pairs, 0-based; starts: further initial sizes ([] = one start; None = the CLI's default)."""
 
 def prepare(
     mesh: Mesh, *, k_process: int = 200, area_normalize: bool = True, threads: Optional[int] = None
@@ -108,6 +109,7 @@ def match_prepared(
     refine: str = "default",
     k: int = 50,
     schedule: Optional[str] = None,
+    landmarks: Optional[list] = None,
     w_orient: Optional[float] = None,
     mirrored: bool = False,
     starts: Optional[list] = None,
