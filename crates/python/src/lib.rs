@@ -165,6 +165,40 @@ impl Mesh {
         self.inner.area()
     }
 
+    /// The validation report of `fmaps info`: counts (n_vertices,
+    /// n_faces, n_edges), area, bounding_box, the defects as lists of
+    /// 0-based elements (degenerate_faces, duplicate_faces,
+    /// non_manifold_edges, non_manifold_vertices, unreferenced_vertices),
+    /// boundary_edges, boundary_loops, connected_components,
+    /// inconsistently_oriented_edges, euler_characteristic, genus (None
+    /// unless manifold), is_manifold, is_closed_manifold.
+    fn validate<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let r = self.inner.validate();
+        let d = PyDict::new(py);
+        d.set_item("n_vertices", r.n_vertices)?;
+        d.set_item("n_faces", r.n_faces)?;
+        d.set_item("n_edges", r.n_edges)?;
+        d.set_item("area", r.area)?;
+        d.set_item("bounding_box", r.bounding_box.to_vec())?;
+        d.set_item("degenerate_faces", r.degenerate_faces.clone())?;
+        d.set_item("duplicate_faces", r.duplicate_faces.clone())?;
+        d.set_item("non_manifold_edges", r.non_manifold_edges.clone())?;
+        d.set_item("non_manifold_vertices", r.non_manifold_vertices.clone())?;
+        d.set_item("unreferenced_vertices", r.unreferenced_vertices.clone())?;
+        d.set_item("boundary_edges", r.boundary_edges)?;
+        d.set_item("boundary_loops", r.boundary_loops)?;
+        d.set_item("connected_components", r.connected_components)?;
+        d.set_item(
+            "inconsistently_oriented_edges",
+            r.inconsistently_oriented_edges,
+        )?;
+        d.set_item("euler_characteristic", r.euler_characteristic)?;
+        d.set_item("genus", r.genus)?;
+        d.set_item("is_manifold", r.is_manifold())?;
+        d.set_item("is_closed_manifold", r.is_closed_manifold())?;
+        Ok(d)
+    }
+
     fn __repr__(&self) -> String {
         format!(
             "Mesh({} vertices, {} faces)",

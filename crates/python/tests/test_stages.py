@@ -191,3 +191,19 @@ def test_map_quality_of_the_identity_and_of_a_mirror_image(pair):
     q = fmaps.map_quality(a, mirrored, ident)
     assert abs(q["orientation"] + 1.0) < 1e-12
     assert abs(q["area_distortion"]) < 1e-12
+
+
+def test_the_validation_report_counts_what_closed_forms_say(pair):
+    p, _, _ = pair
+    r = p["a"].validate()
+    # A closed genus-0 surface: V - E + F = 2, no boundary.
+    assert r["is_closed_manifold"] and r["genus"] == 0 and r["euler_characteristic"] == 2
+    assert r["n_edges"] == 3 * r["n_faces"] // 2
+    g = grid(5).validate()
+    # A 5 x 5 grid: one boundary loop of 16 edges, 25 - 56 + 32 = 1.
+    assert (g["boundary_loops"], g["boundary_edges"], g["euler_characteristic"]) == (1, 16, 1)
+    assert g["genus"] == 0 and not g["is_closed_manifold"]
+    # A repeated triangle is listed (0-based, the later copy).
+    m = grid(3)
+    dup = fmaps.Mesh(m.vertices, np.vstack([m.faces, m.faces[:1]])).validate()
+    assert dup["duplicate_faces"] == [m.n_faces]

@@ -28,6 +28,8 @@ class Mesh:
     @property
     def n_faces(self) -> int: ...
     def area(self) -> float: ...
+    def validate(self) -> dict:
+        """The validation report of `fmaps info`: counts, defects (0-based elements), boundary, components, genus."""
     def save(self, path: Union[str, PathLike]) -> None:
         """Writes .off, .obj or .ply (from the extension), atomically."""
 
