@@ -100,11 +100,7 @@ pub fn bench(args: &Args) -> anyhow::Result<()> {
     }
 
     let mut records = Vec::new();
-    println!(
-        "machine: {} cores; {}",
-        std::thread::available_parallelism().map_or(0, |n| n.get()),
-        cpu_model()
-    );
+    println!("{}", crate::util::machine_header(rayon::current_num_threads()));
     println!("\nLaplacian assembly (cotangent stiffness + lumped mass), median of 7 runs");
     println!(
         "{:<22} {:>7} {:>11} {:>13} {:>7}",
@@ -222,7 +218,7 @@ pub fn bench(args: &Args) -> anyhow::Result<()> {
     let json_path = out_dir.join("eigensolve.json");
     std::fs::write(
         &json_path,
-        serde_json::to_string_pretty(&json!({"cpu": cpu_model(), "records": records}))?,
+        serde_json::to_string_pretty(&json!({"cpu": crate::util::cpu_model(), "kernels": fmaps::nn::cpu_features().to_string(), "records": records}))?,
     )?;
     println!("\nwrote {}", json_path.display());
     Ok(())
@@ -328,13 +324,3 @@ fn name(p: &Path) -> String {
         .map_or_else(String::new, |s| s.to_string_lossy().into_owned())
 }
 
-fn cpu_model() -> String {
-    std::fs::read_to_string("/proc/cpuinfo")
-        .ok()
-        .and_then(|s| {
-            s.lines()
-                .find(|l| l.starts_with("model name"))
-                .map(|l| l.split(':').nth(1).unwrap_or("").trim().to_string())
-        })
-        .unwrap_or_else(|| "unknown CPU".into())
-}

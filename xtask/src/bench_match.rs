@@ -97,8 +97,9 @@ pub fn bench_match(args: &Args) -> anyhow::Result<()> {
     peer[5] = peer[..5].iter().sum();
     let _ = std::fs::remove_dir_all(&out);
 
+    println!("{}", crate::util::machine_header(args.bench.threads));
     println!(
-        "{} {a} -> {b}, {} thread(s), median of {}",
+        "{} {a} -> {b}, {} thread(s) each side, median of {} (both sides warmed up, imports excluded)",
         args.bench.collection, args.bench.threads, args.bench.repeat
     );
     println!(

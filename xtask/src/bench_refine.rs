@@ -132,7 +132,9 @@ fn large(args: &Args, c: &Collection, a: &str, b: &str) -> anyhow::Result<()> {
 
 fn time<T>(repeat: usize, mut f: impl FnMut() -> T) -> (f64, T) {
     let mut times = Vec::new();
-    let mut out = None;
+    // One untimed run first (page faults, caches, lazy pools), as the peer
+    // script does.
+    let mut out = Some(f());
     for _ in 0..repeat.max(1) {
         let t = Instant::now();
         out = Some(f());
@@ -201,12 +203,13 @@ pub fn bench_refine(args: &Args) -> anyhow::Result<()> {
     // The refiners see (C_BA, basis of B, basis of A): their "A" is B.
     let (basis_1, basis_2) = (&pb.basis, &pa.basis);
     let c0 = init.c_ba.clone();
+    println!("{}", crate::util::machine_header(pool.current_num_threads()));
     println!(
-        "{} {a} -> {b} ({} and {} vertices), {} thread(s), fmaps medians of {}",
+        "{} {a} -> {b} ({} and {} vertices), {} thread(s) each side, medians of {} after a warm-up run (both sides)",
         args.bench.collection,
         ma.n_vertices(),
         mb.n_vertices(),
-        args.bench.threads,
+        pool.current_num_threads(),
         args.bench.repeat
     );
 
@@ -381,7 +384,8 @@ pub fn bench_refine(args: &Args) -> anyhow::Result<()> {
             .arg(root().join("xtask/py/pyfm_refine.py"))
             .arg(&work)
             .args(peer_args)
-            .args(["--threads", &threads, "--out"])
+            .args(["--threads", &threads])
+            .args(["--repeat", &args.bench.repeat.to_string(), "--out"])
             .arg(&map_path))?;
         let v: serde_json::Value =
             serde_json::from_str(r.stdout.trim().lines().last().unwrap_or(""))?;

@@ -256,3 +256,27 @@ pub fn read_npy_f64_2d(path: &Path) -> anyhow::Result<Vec<Vec<f64>>> {
     };
     Ok(data.chunks(cols.max(1)).map(<[f64]>::to_vec).collect())
 }
+
+/// The CPU model (from /proc/cpuinfo on Linux).
+pub fn cpu_model() -> String {
+    std::fs::read_to_string("/proc/cpuinfo")
+        .ok()
+        .and_then(|s| {
+            s.lines()
+                .find(|l| l.starts_with("model name"))
+                .map(|l| l.split(':').nth(1).unwrap_or("").trim().to_string())
+        })
+        .unwrap_or_else(|| "unknown CPU".into())
+}
+
+/// The header line of every benchmark table: CPU model, the instruction
+/// set fmaps' kernels run at here (AVX-512 / AVX2 / baseline, AMX yes or
+/// no) and the threads the fmaps side actually used.
+pub fn machine_header(threads_used: usize) -> String {
+    format!(
+        "machine: {} ({} cores); fmaps kernels: {}; fmaps threads used: {threads_used}",
+        cpu_model(),
+        std::thread::available_parallelism().map_or(0, |n| n.get()),
+        fmaps::nn::cpu_features()
+    )
+}
