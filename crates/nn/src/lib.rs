@@ -76,10 +76,17 @@ use nalgebra::DMatrix;
 
 use std::sync::OnceLock;
 
-use brute::{BruteData, brute_search, max_abs, power_of_two_scale, scale_for};
+use brute::{BruteData, FUSED_MAX_DIM, brute_search, max_abs, power_of_two_scale, scale_for};
 use prefix::{PREFIX_FROM, PREFIX_MAX_ROWS, PrefixData, prefix_search};
 use rows::Rows;
 use tree::{LEAF_DATA, LEAF_QUERY, TREE_MAX_DIM, TreeData, tree_search};
+
+/// Rows of both sets from which [`NnStrategy::Auto`] uses the tree (in
+/// `FUSED_MAX_DIM + 1..=TREE_MAX_DIM` dimensions): on spectral embeddings
+/// of FAUST subdivided to 80k vertices, d = 30-48, one thread without
+/// AMX, it beat brute force by 10-25%; at 20k rows brute force was
+/// 1.5-2x faster (the `strategies` example).
+const TREE_MIN_ROWS: usize = 50_000;
 
 pub use cpu::{CpuFeatures, SimdLevel, cpu_features, set_simd_cap, simd_level};
 pub use knn::{KNN_MARGIN, KNearest, k_nearest_rows};
@@ -173,8 +180,8 @@ impl NnParams {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum NnStrategy {
     /// The matrix tiles from 16 dimensions where the CPU has them; else
-    /// the tree in dimensions up to 48 when both sets are large enough for
-    /// it to pay, the prefix search from 64 dimensions with guesses, brute
+    /// the prefix search from 64 dimensions with guesses, the tree in 33
+    /// to 48 dimensions when both sets have 50,000 rows or more, brute
     /// force otherwise.
     #[default]
     Auto,
@@ -407,8 +414,10 @@ impl Searcher {
 /// The strategy [`NnStrategy::Auto`] stands for with `nx` data rows, `nq`
 /// queries of `d` coordinates (others stand for themselves). The choice
 /// follows measurements on FAUST spectral embeddings (README, "Choosing a
-/// strategy"): the tiles wherever they exist, the tree in low dimensions,
-/// the prefix search with guesses in high ones.
+/// strategy"): the tiles wherever they exist, the prefix search with
+/// guesses in high dimensions, the tree only for very large sets in 33-48
+/// dimensions (below 33 the fused brute-force kernel is faster at every
+/// size measured, up to 80k x 80k rows).
 fn resolve(strategy: NnStrategy, nx: usize, nq: usize, d: usize, hinted: bool) -> NnStrategy {
     if strategy != NnStrategy::Auto {
         return strategy;
@@ -417,7 +426,10 @@ fn resolve(strategy: NnStrategy, nx: usize, nq: usize, d: usize, hinted: bool) -
         NnStrategy::Tiles
     } else if (1024..=PREFIX_MAX_ROWS).contains(&nx) && d >= PREFIX_FROM && hinted {
         NnStrategy::Prefix
-    } else if (1..=TREE_MAX_DIM).contains(&d) && nx >= 4 * LEAF_DATA && nq >= 2 * LEAF_QUERY {
+    } else if (FUSED_MAX_DIM + 1..=TREE_MAX_DIM).contains(&d)
+        && nx >= TREE_MIN_ROWS.max(4 * LEAF_DATA)
+        && nq >= TREE_MIN_ROWS.max(2 * LEAF_QUERY)
+    {
         NnStrategy::Tree
     } else {
         NnStrategy::Brute
