@@ -100,7 +100,10 @@ pub fn bench(args: &Args) -> anyhow::Result<()> {
     }
 
     let mut records = Vec::new();
-    println!("{}", crate::util::machine_header(rayon::current_num_threads()));
+    println!(
+        "{}",
+        crate::util::machine_header(rayon::current_num_threads())
+    );
     println!("\nLaplacian assembly (cotangent stiffness + lumped mass), median of 7 runs");
     println!(
         "{:<22} {:>7} {:>11} {:>13} {:>7}",
@@ -218,7 +221,9 @@ pub fn bench(args: &Args) -> anyhow::Result<()> {
     let json_path = out_dir.join("eigensolve.json");
     std::fs::write(
         &json_path,
-        serde_json::to_string_pretty(&json!({"cpu": crate::util::cpu_model(), "kernels": fmaps::nn::cpu_features().to_string(), "records": records}))?,
+        serde_json::to_string_pretty(
+            &json!({"cpu": crate::util::cpu_model(), "kernels": fmaps::nn::cpu_features().to_string(), "records": records}),
+        )?,
     )?;
     println!("\nwrote {}", json_path.display());
     Ok(())
@@ -323,4 +328,3 @@ fn name(p: &Path) -> String {
     p.file_stem()
         .map_or_else(String::new, |s| s.to_string_lossy().into_owned())
 }
-

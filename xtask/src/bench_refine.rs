@@ -203,7 +203,10 @@ pub fn bench_refine(args: &Args) -> anyhow::Result<()> {
     // The refiners see (C_BA, basis of B, basis of A): their "A" is B.
     let (basis_1, basis_2) = (&pb.basis, &pa.basis);
     let c0 = init.c_ba.clone();
-    println!("{}", crate::util::machine_header(pool.current_num_threads()));
+    println!(
+        "{}",
+        crate::util::machine_header(pool.current_num_threads())
+    );
     println!(
         "{} {a} -> {b} ({} and {} vertices), {} thread(s) each side, medians of {} after a warm-up run (both sides)",
         args.bench.collection,
