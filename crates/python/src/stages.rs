@@ -67,7 +67,8 @@ fn descriptor_params(
 
 /// The pipeline's descriptors of one shape (n x p, Fortran order, each
 /// column of unit L² norm in the shape's mass): the `kind` family ("wks"
-/// or "hks") at `n` samples on the first `k` eigenpairs, then, with
+/// or "hks") at `n` samples on the first `k` eigenpairs (at most the
+/// shape's, as the pipeline's `k_descr`), then, with
 /// `landmarks` (0-based vertices of this shape), the landmark variant of
 /// the same family stacked column-wise; every `subsample`-th column kept.
 #[pyfunction]
@@ -81,14 +82,11 @@ fn descriptors<'py>(
     landmarks: Option<Indices<'_>>,
     subsample: usize,
 ) -> PyResult<Bound<'py, PyArray2<f64>>> {
-    let p = descriptor_params(kind, n, k, subsample)?;
-    if k == 0 || k > shape.inner.basis.k() {
-        return Err(err(format!(
-            "k = {k}: the shape holds {} eigenpairs (use 1..={})",
-            shape.inner.basis.k(),
-            shape.inner.basis.k()
-        )));
+    if k == 0 {
+        return Err(err("k = 0: descriptors need at least one eigenpair"));
     }
+    // As the pipeline does: at most the eigenpairs the shape holds.
+    let p = descriptor_params(kind, n, k.min(shape.inner.basis.k()), subsample)?;
     let lms = match &landmarks {
         Some(l) => checked(l, shape.inner.basis.n(), "landmarks")?,
         None => Vec::new(),
@@ -104,7 +102,8 @@ fn descriptors<'py>(
 /// order; B's coefficients to A's, the direction that goes with `map_ab`).
 /// Descriptors: `descr_a` (n_A x p) and `descr_b` (n_B x p), any
 /// per-vertex features with corresponding columns (e.g. learned ones), or
-/// when not given the pipeline's (`kind`, `n`, `k_descr`, `landmarks`: pairs
+/// when not given the pipeline's (`kind`, `n`, `k_descr` (at most the
+/// shapes' eigenpairs), `landmarks`: pairs
 /// of 0-based vertices (of A, of B)). `w_orient`: weight of the
 /// orientation term (default the pipeline's); `mirrored`: B is a mirror
 /// image of A.

@@ -28,6 +28,9 @@ def test_descriptors_have_unit_mass_norm_columns(pair):
     h = fmaps.descriptors(a, kind="hks", n=16, landmarks=np.array([0, 5]))
     # The family and its landmark variant, stacked: 16 + 2 x 16 columns.
     assert h.shape == (a.n_vertices, 48)
+    # k is capped at the eigenpairs held, as the pipeline caps k_descr.
+    small = fmaps.prepare(pair[0]["a"], k_process=60)
+    assert np.array_equal(fmaps.descriptors(small), fmaps.descriptors(small, k=60))
 
 
 def test_the_stages_give_the_pipelines_initial_map(pair):
