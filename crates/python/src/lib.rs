@@ -387,6 +387,17 @@ fn match_shapes(
     result(py, r, quality)
 }
 
+/// The refiner's name and the seconds of each of its steps ("" and none
+/// without refinement).
+fn refiner_summary(report: Option<&fmaps::refine::RefineReport>) -> (String, Vec<f64>) {
+    report.map_or_else(Default::default, |rep| {
+        (
+            rep.method.clone(),
+            rep.iterations.iter().map(|i| i.seconds).collect(),
+        )
+    })
+}
+
 /// The scores of [`fmaps::eval::map_quality`] as a dict.
 fn quality_dict<'py>(
     py: Python<'py>,
@@ -424,13 +435,7 @@ fn result(
         times.set_item(name, v)?;
     }
     let q = quality_dict(py, &quality)?;
-    let (refiner, seconds_per_iteration) = match &r.refine {
-        Some(rep) => (
-            rep.method.clone(),
-            rep.iterations.iter().map(|i| i.seconds).collect(),
-        ),
-        None => (String::new(), Vec::new()),
-    };
+    let (refiner, seconds_per_iteration) = refiner_summary(r.refine.as_ref());
     Ok(MatchResult {
         map_ab: indices(py, &r.t_ab),
         map_ab_init: indices(py, &r.t_ab_init),
@@ -712,10 +717,9 @@ fn checked(v: &PyReadonlyArray1<'_, i64>, n: usize, what: &str) -> PyResult<Vec<
         .collect()
 }
 
-/// `map_ab` checked as a map from `a` to `b`: one entry per vertex of A,
-/// each a vertex of B.
-fn map_between(map_ab: &PyReadonlyArray1<'_, i64>, a: &Mesh, b: &Mesh) -> PyResult<Vec<usize>> {
-    let (na, nb) = (a.inner.n_vertices(), b.inner.n_vertices());
+/// `map_ab` checked as a map from a shape of `na` vertices to one of `nb`:
+/// one entry per vertex of A, each a vertex of B.
+fn map_between(map_ab: &PyReadonlyArray1<'_, i64>, na: usize, nb: usize) -> PyResult<Vec<usize>> {
     if map_ab.len()? != na {
         return Err(err(format!(
             "map_ab has {} entries, A has {na} vertices",
@@ -744,7 +748,7 @@ fn evaluate<'py>(
     threads: Option<usize>,
 ) -> PyResult<Bound<'py, PyDict>> {
     let (na, nb) = (a.inner.n_vertices(), b.inner.n_vertices());
-    let t_ab = map_between(&map_ab, a, b)?;
+    let t_ab = map_between(&map_ab, a.inner.n_vertices(), b.inner.n_vertices())?;
     let gt = fmaps::eval::GroundTruth::new(
         checked(&gt_a, na, "gt_a")?,
         checked(&gt_b, nb, "gt_b")?,
@@ -854,7 +858,7 @@ fn render_transfer(
     size: usize,
 ) -> PyResult<(usize, usize)> {
     use fmaps::viz::{Axis, View};
-    let t_ab = map_between(&map_ab, a, b)?;
+    let t_ab = map_between(&map_ab, a.inner.n_vertices(), b.inner.n_vertices())?;
     let axis = match up {
         "x" => Axis::X,
         "y" => Axis::Y,

@@ -249,14 +249,7 @@ fn prepared_map(
     a: &PreparedShape,
     b: &PreparedShape,
 ) -> PyResult<Vec<usize>> {
-    let (na, nb) = (a.inner.basis.n(), b.inner.basis.n());
-    if map_ab.len()? != na {
-        return Err(err(format!(
-            "map_ab has {} entries, A has {na} vertices",
-            map_ab.len()?
-        )));
-    }
-    checked(map_ab, nb, "map_ab")
+    crate::map_between(map_ab, a.inner.basis.n(), b.inner.basis.n())
 }
 
 /// The result of [`refine`].
@@ -348,13 +341,7 @@ fn refine(
         fmaps::pipeline::refine_point_map(&pa, &pb, &t_ab, &params)
     })?
     .map_err(err)?;
-    let (refiner, seconds_per_iteration) = match &r.refine {
-        Some(rep) => (
-            rep.method.clone(),
-            rep.iterations.iter().map(|i| i.seconds).collect(),
-        ),
-        None => (String::new(), Vec::new()),
-    };
+    let (refiner, seconds_per_iteration) = crate::refiner_summary(r.refine.as_ref());
     Ok(RefinedMap {
         map_ab: indices(py, &r.t_ab),
         c_ba: fortran(r.c_ba).into_pyarray(py).unbind(),
@@ -448,8 +435,9 @@ fn map_quality<'py>(
     map_ab: Indices<'_>,
     map_ba: Option<Indices<'_>>,
 ) -> PyResult<Bound<'py, pyo3::types::PyDict>> {
-    let t_ab = crate::map_between(&map_ab, a, b)?;
-    let t_ba = map_ba.map(|m| crate::map_between(&m, b, a)).transpose()?;
+    let (na, nb) = (a.inner.n_vertices(), b.inner.n_vertices());
+    let t_ab = crate::map_between(&map_ab, na, nb)?;
+    let t_ba = map_ba.map(|m| crate::map_between(&m, nb, na)).transpose()?;
     let (ma, mb) = (Arc::clone(&a.inner), Arc::clone(&b.inner));
     let (q, orientation) = py
         .detach(move || {
