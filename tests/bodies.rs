@@ -83,6 +83,36 @@ fn smooth_shells_matches_two_builds_in_two_poses() {
     assert!(e < 0.3 * e_init, "{e_init} -> {e}");
 }
 
+/// The setting for non-isometric shapes (all eight rigid orientations
+/// screened, the final map chosen by area distortion and orientation) on
+/// the same pair.
+#[test]
+fn smooth_shells_for_non_isometric_shapes_matches_two_builds() {
+    let body = Body::template();
+    let a = body
+        .shape(&Build::random(11), &BodyPose::rest(), 0.06, 1)
+        .unwrap();
+    let b = body
+        .shape(&Build::random(12), &BodyPose::walking(), 0.055, 2)
+        .unwrap();
+    let options = fmaps::pipeline::RefineOptions {
+        non_isometric: true,
+        ..Default::default()
+    };
+    let params = MatchParams {
+        refine: fmaps::pipeline::named_refinement(
+            fmaps::pipeline::RefinerKind::SmoothShells,
+            &options,
+        )
+        .unwrap(),
+        ..MatchParams::default()
+    };
+    let r = match_shapes(&a.mesh, &b.mesh, &params).unwrap();
+    let e = error(&a, &b, &r.t_ab);
+    eprintln!("generated non-iso pair, non-isometric setting: {e:.4}");
+    assert!(e < 0.08, "mean error {e}");
+}
+
 /// The default pipeline (Smooth Shells) gives the same map and functional
 /// map, bit for bit, on one thread and on two: no stage's arithmetic
 /// depends on the number of threads (the eigensolver's dense Ritz step

@@ -28,6 +28,8 @@ pub struct Args {
     #[arg(long = "collection")]
     collections: Vec<String>,
     /// Only the first N test pairs (default: all; after --offset/--stride).
+    /// A subset run writes `target/eval/<collection>-<method>@<offset>[s<stride>][n<N>].json`
+    /// so that chunks of one collection do not overwrite each other.
     #[arg(long)]
     pairs: Option<usize>,
     /// Start at the pair of this 0-based index (with --stride: a regular
@@ -337,11 +339,24 @@ fn refiner_method(refiner: &str) -> anyhow::Result<fmaps::pipeline::Refinement> 
 /// `smooth-shells[:KEY=VALUE,..]`: Smooth Shells with the defaults but the
 /// keys given (k_max, levels, samples, init_samples, proposals, finalists,
 /// signs, seed, rigid, orientations, input, screen: 0 or 1 for rigid and
-/// input).
+/// input; select: 0 orientation score, 1 area distortion and orientation);
+/// `smooth-shells:non-isometric` is [`fmaps::refine::SmoothShells::non_isometric`]
+/// (`fmaps match --non-isometric`).
 fn smooth_shells(spec: &str) -> anyhow::Result<fmaps::refine::SmoothShells> {
     let mut s = fmaps::refine::SmoothShells::default();
     let Some(list) = spec.strip_prefix("smooth-shells:") else {
         return Ok(s);
+    };
+    let list = match list.strip_prefix("non-isometric") {
+        Some(rest) => {
+            s = fmaps::refine::SmoothShells::non_isometric();
+            match rest.strip_prefix(',') {
+                Some(rest) => rest,
+                None if rest.is_empty() => return Ok(s),
+                None => bail!("{spec}: expected non-isometric[,KEY=VALUE,..]"),
+            }
+        }
+        None => list,
     };
     for kv in list.split(',') {
         let (k, v) = kv
@@ -364,8 +379,15 @@ fn smooth_shells(spec: &str) -> anyhow::Result<fmaps::refine::SmoothShells> {
             "orientations" => s.orientations = u,
             "input" => s.use_input_map = n != 0,
             "screen" => s.screen = u,
+            "select" => {
+                s.select = match n {
+                    0 => fmaps::refine::Select::Orientation,
+                    1 => fmaps::refine::Select::AreaAndOrientation,
+                    _ => bail!("{spec}: select is 0 (orientation) or 1 (area and orientation)"),
+                }
+            }
             _ => bail!(
-                "{spec}: unknown key '{k}' (k_max, levels, samples, init_samples, proposals, finalists, signs, seed, rigid, orientations, input, screen)"
+                "{spec}: unknown key '{k}' (k_max, levels, samples, init_samples, proposals, finalists, signs, seed, rigid, orientations, input, screen, select)"
             ),
         }
     }
@@ -494,6 +516,24 @@ pub(crate) fn collection_pairs(
     }
 }
 
+/// The file-name suffix of a run over a subset of the test pairs, so that
+/// a long collection can be run in chunks (`--offset 0 --pairs 50`,
+/// `--offset 50 --pairs 50`, ...) without one chunk overwriting another:
+/// empty for a whole collection.
+fn subset_suffix(args: &Args) -> String {
+    if args.offset == 0 && args.stride <= 1 && args.pairs.is_none() {
+        return String::new();
+    }
+    let mut s = format!("@{}", args.offset);
+    if args.stride > 1 {
+        s += &format!("s{}", args.stride);
+    }
+    if let Some(n) = args.pairs {
+        s += &format!("n{n}");
+    }
+    s
+}
+
 pub fn eval(args: &Args) -> anyhow::Result<()> {
     let bcicp = bcicp_dir(args.data.as_deref())?;
     let collections = collections_or_default(&args.collections);
@@ -589,8 +629,10 @@ pub fn eval(args: &Args) -> anyhow::Result<()> {
                 "threads": if matches!(maps, MapSource::Pipeline(_)) { json!(pool.current_num_threads()) } else { serde_json::Value::Null },
                 "thresholds": thresholds(&params), "curve": curve, "per_pair": per_pair,
             });
-            let path = out_dir.join(format!("{cname}-{method}.json"));
-            std::fs::write(&path, serde_json::to_string_pretty(&row)?)?;
+            let path = out_dir.join(format!("{cname}-{method}{}.json", subset_suffix(args)));
+            let tmp = path.with_extension("json.tmp");
+            std::fs::write(&tmp, serde_json::to_string_pretty(&row)?)?;
+            std::fs::rename(&tmp, &path)?;
             rows.push(row);
         }
     }

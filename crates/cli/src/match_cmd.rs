@@ -91,6 +91,14 @@ pub(crate) struct MatchArgs {
     /// the orientation score reported tells whether a pair needs it.
     #[arg(long)]
     mirrored: bool,
+    /// The shapes are not near-isometric (different people, different
+    /// animals, different builds): Smooth Shells screens all eight rigid
+    /// orientations by a short alignment and chooses the final map by area
+    /// distortion and orientation together (about 1.6x the time; README's
+    /// accuracy table, column `non-isometric`). Other refinements ignore
+    /// it.
+    #[arg(long)]
+    non_isometric: bool,
     /// Keep the meshes' own units: no scaling to unit area before the
     /// eigenbases (by default each shape is scaled to unit area, so that
     /// the map does not depend on the units of either mesh).
@@ -194,6 +202,7 @@ fn refinement(
         adjoint: args.adjoint,
         sinkhorn: args.conversion == ConversionKind::Sinkhorn,
         mirrored: args.mirrored,
+        non_isometric: args.non_isometric,
     };
     let r = fmaps::pipeline::named_refinement(kind, &options).map_err(zoomout_failure)?;
     Ok((kind, r))

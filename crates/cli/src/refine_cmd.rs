@@ -68,6 +68,7 @@ fn refinement(args: &RefineArgs) -> Result<Refinement, Failure> {
         adjoint: args.adjoint,
         sinkhorn: args.conversion == crate::match_cmd::ConversionKind::Sinkhorn,
         mirrored: false,
+        non_isometric: false,
     };
     fmaps::pipeline::named_refinement(args.refine.kind(), &options)
         .map_err(crate::match_cmd::zoomout_failure)

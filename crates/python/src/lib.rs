@@ -257,7 +257,7 @@ fn params_for(
     k: usize,
     k_process: usize,
     w_orient: Option<f64>,
-    mirrored: bool,
+    (mirrored, non_isometric): (bool, bool),
     area_normalize: bool,
 ) -> PyResult<MatchParams> {
     let mut p = MatchParams {
@@ -276,6 +276,7 @@ fn params_for(
         k,
         schedule,
         mirrored,
+        non_isometric,
         ..RefineOptions::default()
     };
     p.refine =
@@ -341,7 +342,7 @@ fn indices(py: Python<'_>, v: &[usize]) -> Py<PyArray1<i64>> {
 /// defaults and the same maps for the same options, on any number of
 /// threads).
 #[pyfunction]
-#[pyo3(signature = (a, b, *, refine = "default", k = 50, k_process = 200, schedule = None, landmarks = None, w_orient = None, mirrored = false, area_normalize = true, starts = None, threads = None))]
+#[pyo3(signature = (a, b, *, refine = "default", k = 50, k_process = 200, schedule = None, landmarks = None, w_orient = None, mirrored = false, non_isometric = false, area_normalize = true, starts = None, threads = None))]
 #[allow(clippy::too_many_arguments)]
 fn match_shapes(
     py: Python<'_>,
@@ -354,6 +355,7 @@ fn match_shapes(
     landmarks: Option<Vec<(i64, i64)>>,
     w_orient: Option<f64>,
     mirrored: bool,
+    non_isometric: bool,
     area_normalize: bool,
     starts: Option<Vec<usize>>,
     threads: Option<usize>,
@@ -368,7 +370,7 @@ fn match_shapes(
         k,
         k_process,
         w_orient,
-        mirrored,
+        (mirrored, non_isometric),
         area_normalize,
     )?;
     if let Some(s) = starts {
@@ -637,7 +639,7 @@ fn prepare(
 /// `area_normalize` are the shapes'). Quality scores are computed on the
 /// prepared (unit-area) meshes.
 #[pyfunction]
-#[pyo3(signature = (a, b, *, refine = "default", k = 50, schedule = None, landmarks = None, w_orient = None, mirrored = false, starts = None, threads = None))]
+#[pyo3(signature = (a, b, *, refine = "default", k = 50, schedule = None, landmarks = None, w_orient = None, mirrored = false, non_isometric = false, starts = None, threads = None))]
 #[allow(clippy::too_many_arguments)]
 fn match_prepared(
     py: Python<'_>,
@@ -649,6 +651,7 @@ fn match_prepared(
     landmarks: Option<Vec<(i64, i64)>>,
     w_orient: Option<f64>,
     mirrored: bool,
+    non_isometric: bool,
     starts: Option<Vec<usize>>,
     threads: Option<usize>,
 ) -> PyResult<MatchResult> {
@@ -668,7 +671,7 @@ fn match_prepared(
         k,
         k_process,
         w_orient,
-        mirrored,
+        (mirrored, non_isometric),
         a.area_normalize,
     )?;
     if let Some(s) = starts {

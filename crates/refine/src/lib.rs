@@ -80,10 +80,10 @@ use nalgebra::DMatrix;
 
 pub use discrete::{DiscreteOp, DiscreteWeights};
 pub use icp::Icp;
-pub use orientation::orientation_score;
+pub use orientation::{area_distortion, orientation_score};
 pub use repair::Repair;
 pub use sampling::farthest_point_sampling;
-pub use shells::SmoothShells;
+pub use shells::{Select, SmoothShells};
 pub use zoomout::{Subsample, ZoomOut};
 
 /// Errors of this crate.

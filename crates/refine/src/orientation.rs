@@ -50,33 +50,15 @@ pub fn orientation_score(
     target_vertices: &[[f64; 3]],
     target_faces: &[[usize; 3]],
 ) -> Result<f64> {
-    if map.len() != source_vertices.len() {
-        return Err(Error::InvalidParameter(format!(
-            "orientation score: the point map has {} entries for {} source vertices",
-            map.len(),
-            source_vertices.len()
-        )));
-    }
     let nt = target_vertices.len();
-    if let Some((at, &index)) = map.iter().enumerate().find(|(_, t)| **t >= nt) {
-        return Err(Error::InvalidParameter(format!(
-            "orientation score: source vertex {at} maps to vertex {index}, but the target has {nt}"
-        )));
-    }
-    for (name, faces, n) in [
-        ("source", source_faces, source_vertices.len()),
-        ("target", target_faces, nt),
-    ] {
-        if let Some((at, f)) = faces
-            .iter()
-            .enumerate()
-            .find(|(_, f)| f.iter().any(|&v| v >= n))
-        {
-            return Err(Error::InvalidParameter(format!(
-                "orientation score: {name} face {at} {f:?} refers to a vertex beyond {n}"
-            )));
-        }
-    }
+    check_map(
+        "orientation score",
+        map,
+        source_vertices,
+        source_faces,
+        target_vertices,
+        target_faces,
+    )?;
     let mut normals = vec![[0.0f64; 3]; nt];
     for f in target_faces {
         let n = cross_at(target_vertices, f[0], f[1], f[2]);
@@ -108,6 +90,102 @@ pub fn orientation_score(
         }
     }
     Ok(if total > 0.0 { signed / total } else { 0.0 })
+}
+
+/// Area-weighted mean of `|ln(image area / face area)|` over the source
+/// triangles whose image is a proper triangle (three distinct vertices, non-zero
+/// area), both meshes scaled to unit area: 0 when every triangle keeps its
+/// share of the surface. A map aligned the wrong way round (a body matched
+/// facing backwards, a limb onto the wrong limb) stretches and squeezes
+/// the surface far more than the right one, whichever way its triangles
+/// turn; [`orientation_score`] sees the turning, this the stretching.
+///
+/// ```
+/// use fmaps_refine::area_distortion;
+/// let mesh = fmaps_mesh_io::generate::icosphere(1.0, 2);
+/// let (v, f) = (mesh.vertices(), mesh.faces());
+/// let identity: Vec<usize> = (0..v.len()).collect();
+/// assert!(area_distortion(&identity, v, f, v, f)?.abs() < 1e-12);
+/// // Scaling the target changes nothing: both are measured at unit area.
+/// let big: Vec<[f64; 3]> = v.iter().map(|p| p.map(|c| 3.0 * c)).collect();
+/// assert!(area_distortion(&identity, v, f, &big, f)?.abs() < 1e-12);
+/// # Ok::<(), fmaps_refine::Error>(())
+/// ```
+pub fn area_distortion(
+    map: &[usize],
+    source_vertices: &[[f64; 3]],
+    source_faces: &[[usize; 3]],
+    target_vertices: &[[f64; 3]],
+    target_faces: &[[usize; 3]],
+) -> Result<f64> {
+    check_map(
+        "area distortion",
+        map,
+        source_vertices,
+        source_faces,
+        target_vertices,
+        target_faces,
+    )?;
+    let area = |v: &[[f64; 3]], f: &[usize; 3]| {
+        let n = cross_at(v, f[0], f[1], f[2]);
+        0.5 * dot(&n, &n).sqrt()
+    };
+    let total_s: f64 = source_faces.iter().map(|f| area(source_vertices, f)).sum();
+    let total_t: f64 = target_faces.iter().map(|f| area(target_vertices, f)).sum();
+    if total_s <= 0.0 || total_t <= 0.0 {
+        return Ok(0.0);
+    }
+    let (mut sum, mut weight) = (0.0, 0.0);
+    for f in source_faces {
+        let g = [map[f[0]], map[f[1]], map[f[2]]];
+        if g[0] == g[1] || g[1] == g[2] || g[0] == g[2] {
+            continue;
+        }
+        let (a, b) = (area(source_vertices, f), area(target_vertices, &g));
+        if a > 0.0 && b > 0.0 {
+            sum += a * ((b / total_t) / (a / total_s)).ln().abs();
+            weight += a;
+        }
+    }
+    Ok(if weight > 0.0 { sum / weight } else { 0.0 })
+}
+
+fn check_map(
+    what: &str,
+    map: &[usize],
+    source_vertices: &[[f64; 3]],
+    source_faces: &[[usize; 3]],
+    target_vertices: &[[f64; 3]],
+    target_faces: &[[usize; 3]],
+) -> Result<()> {
+    if map.len() != source_vertices.len() {
+        return Err(Error::InvalidParameter(format!(
+            "{what}: the point map has {} entries for {} source vertices",
+            map.len(),
+            source_vertices.len()
+        )));
+    }
+    let nt = target_vertices.len();
+    if let Some((at, &index)) = map.iter().enumerate().find(|(_, t)| **t >= nt) {
+        return Err(Error::InvalidParameter(format!(
+            "{what}: source vertex {at} maps to vertex {index}, but the target has {nt}"
+        )));
+    }
+    for (name, faces, n) in [
+        ("source", source_faces, source_vertices.len()),
+        ("target", target_faces, nt),
+    ] {
+        if let Some((at, f)) = faces
+            .iter()
+            .enumerate()
+            .find(|(_, f)| f.iter().any(|&v| v >= n))
+        {
+            return Err(Error::InvalidParameter(format!(
+                "{what}: {name} face {at} {f:?} refers to a vertex beyond {n}"
+            )));
+        }
+    }
+    Ok(())
 }
 
 fn cross_at(v: &[[f64; 3]], i: usize, j: usize, k: usize) -> [f64; 3] {
@@ -164,6 +242,42 @@ mod tests {
             .map(|i| if i % m <= 2 { i } else { mirror[i] })
             .collect();
         assert_eq!(orientation_score(&half, &v, &f, &v, &f).unwrap(), 0.0);
+    }
+
+    #[test]
+    fn area_distortion_has_its_closed_form() {
+        let (v, f) = grid();
+        let id: Vec<usize> = (0..v.len()).collect();
+        // A uniform stretch keeps every triangle's share of the area.
+        let wide: Vec<[f64; 3]> = v.iter().map(|p| [3.0 * p[0], p[1], 0.0]).collect();
+        assert!(area_distortion(&id, &v, &f, &wide, &f).unwrap().abs() < 1e-12);
+        // Columns x >= 2 stretched 3x: the target's area is 8 + 24 = 32
+        // against 16, so the left half keeps 1/2 of its share and the right
+        // half gets 3/2: (ln 2 + ln 1.5) / 2 = ln(3) / 2.
+        let half: Vec<[f64; 3]> = v
+            .iter()
+            .map(|p| {
+                [
+                    if p[0] <= 2.0 {
+                        p[0]
+                    } else {
+                        2.0 + 3.0 * (p[0] - 2.0)
+                    },
+                    p[1],
+                    0.0,
+                ]
+            })
+            .collect();
+        let d = area_distortion(&id, &v, &f, &half, &f).unwrap();
+        assert!((d - 3f64.ln() / 2.0).abs() < 1e-12, "{d}");
+        // Collapsed triangles do not count; a map onto one vertex scores 0.
+        assert_eq!(area_distortion(&[3; 25], &v, &f, &v, &f).unwrap(), 0.0);
+        let e = area_distortion(&[0; 3], &v, &f, &v, &f).unwrap_err();
+        assert!(
+            e.to_string()
+                .contains("area distortion: the point map has 3"),
+            "{e}"
+        );
     }
 
     #[test]

@@ -38,6 +38,12 @@
 //! Proposals and orientations run in parallel. `reflect` aligns A's
 //! mirror image instead (for a B that is a mirror image of A).
 //!
+//! Between shapes that are not near-isometric (different builds) the
+//! surrogate's two best orientations often miss the right one;
+//! [`SmoothShells::non_isometric`] screens all eight by a short alignment
+//! and keeps the two whose maps distort area least, and chooses the final
+//! map by area distortion and orientation together.
+//!
 //! Where this differs from the paper's description: the alignment levels
 //! use `samples` farthest-point samples of each shape (the paper's
 //! initialisation uses 1000 samples, its main run all vertices) and the
@@ -53,6 +59,7 @@
 
 mod level;
 mod rigid;
+mod screen;
 
 /// The smallest shell of the proposals.
 const K_MIN: usize = 6;
@@ -139,13 +146,30 @@ pub struct SmoothShells {
     /// equal share of the random ones (the total stays `proposals` x
     /// `orientations`), its best proposal runs a short alignment (12
     /// levels on the initialisation's samples), and the `orientations`
-    /// whose short alignment's map preserves orientation best run the
-    /// whole alignment. Measured on the first 12 generated non-isometric
-    /// pairs (README): 8 screened, 14.6 mean error x100 against 22.9
-    /// without (all 8 orientations through the whole alignment: 12.7), at
-    /// about 1.6x the time; not the default until measured on every
-    /// collection.
+    /// whose short alignment's map distorts area least
+    /// ([`crate::area_distortion`]) run the whole alignment: a body
+    /// aligned facing backwards, or with a leg on an arm, stretches the
+    /// surface far more than the right alignment even between different
+    /// builds, where the alignment energies are close. About 1.6x the
+    /// time of the default; see [`SmoothShells::non_isometric`].
     pub screen: usize,
+    /// How the final maps of the orientations that ran the whole
+    /// alignment are compared.
+    pub select: Select,
+}
+
+/// How [`SmoothShells`] chooses among the final maps of its orientations
+/// (none of these needs ground truth).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Select {
+    /// The highest [`crate::orientation_score`]: the one that folds least.
+    #[default]
+    Orientation,
+    /// The lowest [`crate::area_distortion`] minus
+    /// [`crate::orientation_score`]: stretching and folding, both
+    /// unitless and of the same order (area distortions ~0.3-0.7 and
+    /// orientation scores ~0.5-0.9 between bodies of different builds).
+    AreaAndOrientation,
 }
 
 impl Default for SmoothShells {
@@ -164,6 +188,31 @@ impl Default for SmoothShells {
             finalists: 1,
             sign_hypotheses: 4,
             screen: 0,
+            select: Select::Orientation,
+        }
+    }
+}
+
+impl SmoothShells {
+    /// The setting for shapes that are not near-isometric (different
+    /// people, different animals): all eight rigid orientations screened
+    /// by a short alignment, the two that distort area least aligned in
+    /// full, and the final map chosen by area distortion and orientation
+    /// together ([`Select::AreaAndOrientation`]). About 1.6x the time of
+    /// the default. On the 30 generated non-isometric pairs (README) it
+    /// lowers the mean geodesic error from the default's 15.8 x100 to
+    /// the figure README gives; on near-isometric pairs the default's
+    /// two orientations suffice.
+    ///
+    /// ```
+    /// let s = fmaps_refine::SmoothShells::non_isometric();
+    /// assert_eq!((s.screen, s.orientations), (8, 2));
+    /// ```
+    pub fn non_isometric() -> SmoothShells {
+        SmoothShells {
+            screen: 8,
+            select: Select::AreaAndOrientation,
+            ..SmoothShells::default()
         }
     }
 }
@@ -446,7 +495,14 @@ impl SmoothShells {
                 let (_, state) = best.expect("at least one finalist");
                 let map = Self::point_map(x, y, &state, self.k_max, &mut rep)?;
                 let score = if xs.len() > 1 {
-                    sign * crate::orientation_score(&map, &y.verts, y.faces, &x.verts, x.faces)?
+                    let o = sign
+                        * crate::orientation_score(&map, &y.verts, y.faces, &x.verts, x.faces)?;
+                    match self.select {
+                        Select::Orientation => o,
+                        Select::AreaAndOrientation => {
+                            o - crate::area_distortion(&map, &y.verts, y.faces, &x.verts, x.faces)?
+                        }
+                    }
                 } else {
                     0.0
                 };
@@ -470,74 +526,6 @@ impl SmoothShells {
         // The kept orientation's levels are the report's iterations.
         report.iterations.extend(rep.iterations);
         Ok((state, map))
-    }
-
-    /// The `orientations` of `xs` whose best proposal, aligned by a short
-    /// schedule (12 levels on the samples `ix`, `iy`), gives the map that
-    /// preserves orientation best, with their proposals (see
-    /// [`SmoothShells::screen`]).
-    #[allow(clippy::type_complexity)]
-    fn screened<'s>(
-        &self,
-        xs: Vec<Shell<'s>>,
-        y: &Shell<'_>,
-        ranked: Vec<Vec<Alignment>>,
-        (ix, iy): (&Samples, &Samples),
-        gram: &DMatrix<f64>,
-        report: &mut RefineReport,
-    ) -> Result<(Vec<Shell<'s>>, Vec<Vec<Alignment>>)> {
-        let quick = SmoothShells {
-            levels: 12,
-            ..self.clone()
-        };
-        let sign = if self.reflect { -1.0 } else { 1.0 };
-        let scores: Vec<Result<(f64, RefineReport)>> = xs
-            .par_iter()
-            .zip(&ranked)
-            .map(|(x, states)| {
-                let mut rep = RefineReport::start(String::new());
-                let Some(best) = states.first() else {
-                    return Ok((f64::NEG_INFINITY, rep));
-                };
-                let (_, state) = quick.align(
-                    x,
-                    y,
-                    (ix, iy),
-                    (ix, iy),
-                    gram,
-                    as_start(best.clone()),
-                    &mut rep,
-                )?;
-                rep.iterations.clear();
-                let map = Self::point_map(x, y, &state, self.k_max, &mut rep)?;
-                let o = crate::orientation_score(&map, &y.verts, y.faces, &x.verts, x.faces)?;
-                Ok((sign * o, rep))
-            })
-            .collect();
-        let mut order = Vec::with_capacity(scores.len());
-        for (o, r) in scores.into_iter().enumerate() {
-            let (score, rep) = r?;
-            merge(report, &rep);
-            order.push((score, o));
-        }
-        // Best first; ties (and NaN) keep the surrogate's order.
-        order.sort_by(|a, b| b.0.total_cmp(&a.0).then(a.1.cmp(&b.1)));
-        let keep: Vec<usize> = order
-            .iter()
-            .take(self.orientations.max(1))
-            .map(|&(_, o)| o)
-            .collect();
-        let mut xs: Vec<Option<Shell<'s>>> = xs.into_iter().map(Some).collect();
-        let mut ranked: Vec<Option<Vec<Alignment>>> = ranked.into_iter().map(Some).collect();
-        Ok(keep
-            .into_iter()
-            .map(|o| {
-                (
-                    xs[o].take().expect("kept once"),
-                    ranked[o].take().expect("kept once"),
-                )
-            })
-            .unzip())
     }
 
     /// Runs proposals `(orientation, state, Laplacian weight)` over shells
@@ -649,8 +637,21 @@ impl SmoothShells {
 
 impl Refiner for SmoothShells {
     fn name(&self) -> String {
+        let screen = if self.screen > self.orientations.max(1) {
+            format!(
+                ", {} orientations screened, {} aligned",
+                self.screen,
+                self.orientations.max(1)
+            )
+        } else {
+            String::new()
+        };
+        let select = match self.select {
+            Select::Orientation => "",
+            Select::AreaAndOrientation => ", kept by area distortion and orientation",
+        };
         format!(
-            "smooth-shells 20:{} ({} levels, {} proposals)",
+            "smooth-shells 20:{} ({} levels, {} proposals{screen}{select})",
             self.k_max, self.levels, self.proposals
         )
     }

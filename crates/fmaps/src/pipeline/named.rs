@@ -128,6 +128,11 @@ pub struct RefineOptions {
     /// The target is a mirror image of the source (Smooth Shells aligns
     /// the source's reflection).
     pub mirrored: bool,
+    /// The shapes are not near-isometric (different people, different
+    /// animals): Smooth Shells screens all eight rigid orientations
+    /// ([`crate::refine::SmoothShells::non_isometric`], about 1.6x the
+    /// time). Other refinements ignore it.
+    pub non_isometric: bool,
 }
 
 impl Default for RefineOptions {
@@ -141,6 +146,7 @@ impl Default for RefineOptions {
             adjoint: false,
             sinkhorn: false,
             mirrored: false,
+            non_isometric: false,
         }
     }
 }
@@ -198,7 +204,11 @@ pub fn named_refinement(
         RefinerKind::Bcicp => Refinement::Custom(Arc::new(refine::Repair::default())),
         RefinerKind::SmoothShells => Refinement::Custom(Arc::new(refine::SmoothShells {
             reflect: options.mirrored,
-            ..Default::default()
+            ..if options.non_isometric {
+                refine::SmoothShells::non_isometric()
+            } else {
+                refine::SmoothShells::default()
+            }
         })),
         RefinerKind::Icp => Refinement::Icp(Icp {
             max_iterations: options.icp_iterations,

@@ -91,13 +91,15 @@ def match_shapes(
     landmarks: Optional[list] = None,
     w_orient: Optional[float] = None,
     mirrored: bool = False,
+    non_isometric: bool = False,
     area_normalize: bool = True,
     starts: Optional[list] = None,
     threads: Optional[int] = None,
 ) -> MatchResult:
     """The pipeline of `fmaps match`; refine: "default" (Smooth Shells), or a name of `fmaps match --refine`:
     "none", "icp", "zoomout", "bijective-zoomout", "discrete", "bcicp", "smooth-shells"; schedule: "START:FINAL:STEP"
-    for ZoomOut and the discrete presets; landmarks: (vertex of A, vertex of B) pairs, 0-based; starts: further initial sizes ([] = one start; None = the CLI's default)."""
+    for ZoomOut and the discrete presets; landmarks: (vertex of A, vertex of B) pairs, 0-based; starts: further initial sizes ([] = one start; None = the CLI's default);
+    non_isometric: the shapes are not near-isometric (different people or animals), as `fmaps match --non-isometric`."""
 
 def prepare(
     mesh: Mesh, *, k_process: int = 200, area_normalize: bool = True, threads: Optional[int] = None
@@ -114,6 +116,7 @@ def match_prepared(
     landmarks: Optional[list] = None,
     w_orient: Optional[float] = None,
     mirrored: bool = False,
+    non_isometric: bool = False,
     starts: Optional[list] = None,
     threads: Optional[int] = None,
 ) -> MatchResult:

@@ -52,7 +52,7 @@ def match_collection(
     cluster ``ray.init`` connected to (a local one is started if none).
 
     ``match_options`` are :func:`fmaps.match_prepared`'s (``refine``,
-    ``k``, ``w_orient``, ``mirrored``, ``starts``). Each shape's eigenbasis
+    ``k``, ``w_orient``, ``mirrored``, ``non_isometric``, ``starts``). Each shape's eigenbasis
     is computed once. Returns ``{(name_a, name_b): dict}`` with ``map_ab``
     (for each vertex of A a vertex of B, 0-based), ``c_ba``,
     ``orientation``, ``quality``, ``times`` and ``refiner``. ``on_result``,
