@@ -46,7 +46,7 @@ struct Cli {
 enum Command {
     /// Benchmark the Laplacian and the eigensolvers against SciPy.
     Bench(bench::Args),
-    /// The benchmark table over test pairs (published maps, fmaps-default (= smooth-shells, what `fmaps match` runs), fmaps-init, fmaps-icp, fmaps-zoomout[:START:FINAL:STEP], fmaps-smooth-shells[:KEY=VALUE,..], REFINER@PUBLISHED such as zoomout@WKSini_symm, pyfm:<stage>).
+    /// The benchmark table over test pairs (published maps, fmaps-default (= smooth-shells, what `fmaps match` runs), fmaps-init, fmaps-icp, fmaps-zoomout[:START:FINAL:STEP], fmaps-smooth-shells[:KEY=VALUE,..] (fmaps-smooth-shells:non-isometric = `fmaps match --non-isometric`), REFINER@PUBLISHED such as zoomout@WKSini_symm, pyfm:<stage>).
     Eval(eval::Args),
     /// Write the generated benchmark collection (bodies of different builds and poses, exact ground truth) to target/generated/bcicp/generated.
     Generate(generated::Args),
