@@ -28,7 +28,11 @@
 //!   shapes' smooth shells aligned coarse to fine by a deformation field
 //!   and a functional map in a product space, after its own
 //!   descriptor-free initialisation (rigid alignment and deformation
-//!   proposals); the strongest refiner here on non-isometric pairs.
+//!   proposals); the strongest refiner here on non-isometric pairs, and
+//!   stronger still with [`SmoothShells::non_isometric`] (all eight rigid
+//!   orientations screened).
+//! - Map scores without ground truth: [`orientation_score`] (folds) and
+//!   [`area_distortion`] (stretching), used to choose among hypotheses.
 //!
 //! All implement [`Refiner`], so a pipeline swaps one for the other (or
 //! for its own) through a trait object. Every nearest-neighbour search is
