@@ -27,7 +27,7 @@ impl SmoothShells {
         let scores = self.quick_scores(&xs, y, &ranked, (ix, iy), gram, report)?;
         // Least area distortion first (a lower is better: negated).
         let mut order: Vec<(f64, usize)> =
-            scores.iter().enumerate().map(|(o, s)| (-s.1, o)).collect();
+            scores.iter().enumerate().map(|(o, a)| (-a, o)).collect();
         // Best first; ties (and NaN) keep the surrogate's order.
         order.sort_by(|a, b| b.0.total_cmp(&a.0).then(a.1.cmp(&b.1)));
         let keep: Vec<usize> = order
@@ -48,9 +48,9 @@ impl SmoothShells {
             .unzip())
     }
 
-    /// Per orientation, the (orientation score, area distortion) of the map
+    /// Per orientation, the area distortion of the map
     /// its best proposal gives after a short alignment (12 levels on the
-    /// samples `ix`, `iy`); `(−∞, ∞)` for an orientation without proposals.
+    /// samples `ix`, `iy`); ∞ for an orientation without proposals.
     fn quick_scores(
         &self,
         xs: &[Shell<'_>],
@@ -59,19 +59,18 @@ impl SmoothShells {
         (ix, iy): (&Samples, &Samples),
         gram: &DMatrix<f64>,
         report: &mut RefineReport,
-    ) -> Result<Vec<(f64, f64)>> {
+    ) -> Result<Vec<f64>> {
         let quick = SmoothShells {
             levels: 12,
             ..self.clone()
         };
-        let sign = if self.reflect { -1.0 } else { 1.0 };
-        let scores: Vec<Result<((f64, f64), RefineReport)>> = xs
+        let scores: Vec<Result<(f64, RefineReport)>> = xs
             .par_iter()
             .zip(ranked)
             .map(|(x, states)| {
                 let mut rep = RefineReport::start(String::new());
                 let Some(best) = states.first() else {
-                    return Ok(((f64::NEG_INFINITY, f64::INFINITY), rep));
+                    return Ok((f64::INFINITY, rep));
                 };
                 let (_, state) = quick.align(
                     x,
@@ -84,9 +83,8 @@ impl SmoothShells {
                 )?;
                 rep.iterations.clear();
                 let map = Self::point_map(x, y, &state, self.k_max, &mut rep)?;
-                let o = crate::orientation_score(&map, &y.verts, y.faces, &x.verts, x.faces)?;
                 let a = crate::area_distortion(&map, &y.verts, y.faces, &x.verts, x.faces)?;
-                Ok(((sign * o, a), rep))
+                Ok((a, rep))
             })
             .collect();
         let mut out = Vec::with_capacity(scores.len());
