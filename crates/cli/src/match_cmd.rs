@@ -46,29 +46,8 @@ pub(crate) struct MatchArgs {
     /// map.
     #[arg(long, value_enum)]
     refine: Option<RefineKind>,
-    /// ZoomOut schedule START:FINAL:STEP (the basis grows from START to
-    /// FINAL by STEP; FINAL eigenpairs are computed if k-process is lower;
-    /// default: `fmaps_refine::ZoomOut::default()`'s, 50:150:5).
-    #[arg(long, value_name = "START:FINAL:STEP")]
-    zoomout: Option<String>,
-    /// ICP iterations (stops earlier at a fixed point).
-    #[arg(long, default_value_t = Icp::default().max_iterations)]
-    icp_iterations: usize,
-    /// Run the ZoomOut iterations on this many farthest points per shape
-    /// (the paper's fast variant); the final map covers all vertices.
-    #[arg(long)]
-    refine_samples: Option<usize>,
-    /// Bijective ZoomOut: refine both directions together.
-    #[arg(long)]
-    bijective: bool,
-    /// Convert maps with the adjoint of C (initial map and refinement).
-    #[arg(long)]
-    adjoint: bool,
-    /// How the refiners turn C into a point map: nearest neighbours, or
-    /// the Fast Sinkhorn Filter (entropic transport on a sparse k-NN
-    /// support; closer to bijective, slower).
-    #[arg(long, value_enum, default_value_t = ConversionKind::Nn)]
-    pub(crate) conversion: ConversionKind,
+    #[command(flatten)]
+    pub(crate) refiner: RefinerFlags,
     /// Multi-start: also run from initial maps of these sizes and keep
     /// one final map by --select; `none` for a single start. Default:
     /// `8,20` with --refine zoomout, bijective-zoomout or discrete
@@ -167,6 +146,59 @@ pub(crate) enum SelectKind {
     Area,
 }
 
+/// The refiners' own flags, shared by `fmaps match` (and `batch`) and
+/// `fmaps refine`.
+#[derive(clap::Args, Clone)]
+pub(crate) struct RefinerFlags {
+    /// ZoomOut schedule START:FINAL:STEP (the basis grows from START to
+    /// FINAL by STEP; FINAL eigenpairs are computed when fewer would be;
+    /// default: `fmaps_refine::ZoomOut::default()`'s, 50:150:5).
+    #[arg(long, value_name = "START:FINAL:STEP")]
+    pub(crate) zoomout: Option<String>,
+    /// ICP iterations (stops earlier at a fixed point).
+    #[arg(long, default_value_t = Icp::default().max_iterations)]
+    icp_iterations: usize,
+    /// Run the ZoomOut iterations on this many farthest points per shape
+    /// (the paper's fast variant); the final map covers all vertices.
+    #[arg(long)]
+    refine_samples: Option<usize>,
+    /// Bijective ZoomOut: refine both directions together.
+    #[arg(long)]
+    bijective: bool,
+    /// Convert maps with the adjoint of C (in `match`, the initial map's
+    /// conversion too).
+    #[arg(long)]
+    pub(crate) adjoint: bool,
+    /// How the refiners turn C into a point map: nearest neighbours, or
+    /// the Fast Sinkhorn Filter (entropic transport on a sparse k-NN
+    /// support; closer to bijective, slower).
+    #[arg(long, value_enum, default_value_t = ConversionKind::Nn)]
+    pub(crate) conversion: ConversionKind,
+}
+
+impl RefinerFlags {
+    /// The library's refinement options for these flags, a map of size
+    /// `k` and the given orientation settings.
+    pub(crate) fn options(
+        &self,
+        k: usize,
+        mirrored: bool,
+        non_isometric: bool,
+    ) -> fmaps::pipeline::RefineOptions {
+        fmaps::pipeline::RefineOptions {
+            k,
+            schedule: self.zoomout.clone(),
+            icp_iterations: self.icp_iterations,
+            samples: self.refine_samples,
+            bijective: self.bijective,
+            adjoint: self.adjoint,
+            sinkhorn: self.conversion == ConversionKind::Sinkhorn,
+            mirrored,
+            non_isometric,
+        }
+    }
+}
+
 /// `--conversion`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
 pub(crate) enum ConversionKind {
@@ -188,22 +220,14 @@ fn refinement(
     smallest: usize,
 ) -> Result<(fmaps::pipeline::RefinerKind, fmaps::pipeline::Refinement), Failure> {
     use fmaps::pipeline::RefinerKind;
-    let kind = match (args.refine, &args.zoomout) {
+    let kind = match (args.refine, &args.refiner.zoomout) {
         (Some(k), _) => k.kind(),
         (None, Some(_)) => RefinerKind::Zoomout,
         (None, None) => RefinerKind::default_for(smallest),
     };
-    let options = fmaps::pipeline::RefineOptions {
-        k: args.k,
-        schedule: args.zoomout.clone(),
-        icp_iterations: args.icp_iterations,
-        samples: args.refine_samples,
-        bijective: args.bijective,
-        adjoint: args.adjoint,
-        sinkhorn: args.conversion == ConversionKind::Sinkhorn,
-        mirrored: args.mirrored,
-        non_isometric: args.non_isometric,
-    };
+    let options = args
+        .refiner
+        .options(args.k, args.mirrored, args.non_isometric);
     let r = fmaps::pipeline::named_refinement(kind, &options).map_err(zoomout_failure)?;
     Ok((kind, r))
 }
@@ -229,7 +253,7 @@ pub(crate) fn params_of(args: &MatchArgs, smallest: usize) -> Result<MatchParams
     if let Some(p) = &args.landmarks {
         params.landmarks = read_landmarks(p)?.pairs;
     }
-    params.adjoint = args.adjoint;
+    params.adjoint = args.refiner.adjoint;
     params.orient_reversing = args.mirrored;
     params.area_normalize = !args.no_area_normalize;
     let (kind, refine) = refinement(args, smallest)?;
@@ -391,7 +415,7 @@ pub(crate) fn match_cmd(args: &MatchArgs) -> Result<(), Failure> {
         100.0 * r.metrics.sparsity
     );
     if args.refine.is_none()
-        && args.zoomout.is_none()
+        && args.refiner.zoomout.is_none()
         && fmaps::pipeline::RefinerKind::default_for(a.n_vertices().min(b.n_vertices()))
             == fmaps::pipeline::RefinerKind::None
     {

@@ -3,7 +3,6 @@
 use super::*;
 
 use fmaps::pipeline::{MatchParams, Refinement};
-use fmaps::refine::Icp;
 
 use crate::match_cmd::{RefineKind, match_failure};
 
@@ -25,25 +24,8 @@ pub(crate) struct RefineArgs {
     /// from (ZoomOut: at least START).
     #[arg(long, short = 'k', default_value_t = MatchParams::default().k)]
     k: usize,
-    /// ZoomOut schedule START:FINAL:STEP (default 50:150:5).
-    #[arg(long, value_name = "START:FINAL:STEP")]
-    zoomout: Option<String>,
-    /// ICP iterations (stops earlier at a fixed point).
-    #[arg(long, default_value_t = Icp::default().max_iterations)]
-    icp_iterations: usize,
-    /// Run the ZoomOut iterations on this many farthest points per shape.
-    #[arg(long)]
-    refine_samples: Option<usize>,
-    /// Bijective ZoomOut: refine both directions together.
-    #[arg(long)]
-    bijective: bool,
-    /// Convert maps with the adjoint of C.
-    #[arg(long)]
-    adjoint: bool,
-    /// How the refiner turns C into a point map: nearest neighbours, or
-    /// the Fast Sinkhorn Filter (closer to bijective, slower).
-    #[arg(long, value_enum, default_value_t = crate::match_cmd::ConversionKind::Nn)]
-    conversion: crate::match_cmd::ConversionKind,
+    #[command(flatten)]
+    refiner: crate::match_cmd::RefinerFlags,
     /// Keep the meshes' own units (no scaling to unit area).
     #[arg(long)]
     no_area_normalize: bool,
@@ -59,17 +41,7 @@ pub(crate) struct RefineArgs {
 }
 
 fn refinement(args: &RefineArgs) -> Result<Refinement, Failure> {
-    let options = fmaps::pipeline::RefineOptions {
-        k: args.k,
-        schedule: args.zoomout.clone(),
-        icp_iterations: args.icp_iterations,
-        samples: args.refine_samples,
-        bijective: args.bijective,
-        adjoint: args.adjoint,
-        sinkhorn: args.conversion == crate::match_cmd::ConversionKind::Sinkhorn,
-        mirrored: false,
-        non_isometric: false,
-    };
+    let options = args.refiner.options(args.k, false, false);
     fmaps::pipeline::named_refinement(args.refine.kind(), &options)
         .map_err(crate::match_cmd::zoomout_failure)
 }
@@ -99,7 +71,7 @@ pub(crate) fn refine_cmd(args: &RefineArgs) -> Result<(), Failure> {
     let mut params = MatchParams {
         k: args.k,
         refine,
-        adjoint: args.adjoint,
+        adjoint: args.refiner.adjoint,
         area_normalize: !args.no_area_normalize,
         ..MatchParams::default()
     };
