@@ -22,6 +22,19 @@ pub fn json_of(cmd: &mut Command) -> serde_json::Value {
     serde_json::from_slice(&out.stdout).unwrap()
 }
 
+/// Runs `fmaps ARGS`, asserts that it is refused with exit code 2
+/// (showing its output otherwise) and returns its stderr.
+pub fn refused<I, S>(args: I) -> String
+where
+    I: IntoIterator<Item = S>,
+    S: AsRef<std::ffi::OsStr>,
+{
+    let out = fmaps().args(args).output().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr).into_owned();
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    err
+}
+
 /// A unit square grid (25 vertices, area 1) in `dir`: g.off, the
 /// identity as ground truth g.vts and map id.map, and shift.map, one step
 /// (0.25) to the right except on the last column (mean error 0.25 * 20/25).
