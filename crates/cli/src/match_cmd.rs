@@ -173,7 +173,7 @@ pub(crate) struct RefinerFlags {
     /// the Fast Sinkhorn Filter (entropic transport on a sparse k-NN
     /// support; closer to bijective, slower).
     #[arg(long, value_enum, default_value_t = ConversionKind::Nn)]
-    pub(crate) conversion: ConversionKind,
+    conversion: ConversionKind,
 }
 
 impl RefinerFlags {

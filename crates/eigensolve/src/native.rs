@@ -416,7 +416,7 @@ fn project_out(
     // Transposed, `Cᵀ = Wᵀ V` and `Wᵀ −= Cᵀ Vᵀ`: the same sums to the last
     // bit as `C = Vᵀ W`, `W −= V C`, but with the wide V on the right faer's
     // GEMM skips repacking it, 1.4–1.7x faster for these shapes (n x
-    // hundreds against n x b; the eigensolve at 5k, k = 200: ~25% less).
+    // hundreds against n x b; the eigensolve at 5k, k = 200: 15–25% less).
     let mut ct = Mat::<f64>::zeros(b, hi - lo);
     matmul(
         ct.as_mut(),
