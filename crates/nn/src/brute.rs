@@ -19,6 +19,10 @@ pub(crate) const PANEL: usize = 16;
 /// are loaded once for all of them, and their scores (`GROUP` x rows f32)
 /// stay in the first-level cache for the second scan.
 pub(crate) const GROUP: usize = 4;
+/// The group with AVX-512: eight accumulators of one register each keep
+/// both FMA units busy (four leave them waiting on the previous sum);
+/// AVX2 needs two registers per accumulator, so four fill its sixteen.
+pub(crate) const WIDE_GROUP: usize = 8;
 /// Queries per parallel task of the fused search.
 const FUSED_BLOCK: usize = 64;
 /// Widest data the fused search takes. Up to here, writing every score of
@@ -104,59 +108,72 @@ impl BruteData {
         }
     }
 
-    /// The fused search: per group of [`GROUP`] queries, every score
-    /// `|x|² − 2 q·x` in f32 panel by panel (the products and their lane
-    /// minima in registers, the scores kept for the second scan), then
-    /// each query's rows within [`fused_err`]'s band of its best score
-    /// re-checked in f64.
+    /// The fused search: per group of [`GROUP`] queries ([`WIDE_GROUP`]
+    /// with AVX-512), every score `|x|² − 2 q·x` in f32 panel by panel
+    /// (the products and their lane minima in registers, the scores kept
+    /// for the second scan), then each query's rows within [`fused_err`]'s
+    /// band of its best score re-checked in f64.
     fn search_fused(&self, queries: &DMatrix<f64>) -> Vec<usize> {
-        let (nx, d) = (self.x_norm.len(), self.d);
-        let np = nx.div_ceil(PANEL);
         let q_rows = row_major(queries, None);
         let nq = queries.nrows();
+        #[cfg(target_arch = "x86_64")]
+        let wide = crate::cpu::has_v4();
+        #[cfg(not(target_arch = "x86_64"))]
+        let wide = false;
         let starts: Vec<usize> = (0..nq).step_by(FUSED_BLOCK).collect();
         let blocks: Vec<Vec<usize>> = starts
             .par_iter()
             .map(|&q0| {
-                let end = (q0 + FUSED_BLOCK).min(nq);
-                let mut out = Vec::with_capacity(end - q0);
-                SCORES.with_borrow_mut(|buf| {
-                    if buf.len() < GROUP * np * PANEL {
-                        buf.resize(GROUP * np * PANEL, 0.0);
-                    }
-                    let scores = &mut buf[..GROUP * np * PANEL];
-                    let mut c = [0.0f32; GROUP * FUSED_MAX_DIM];
-                    for g0 in (q0..end).step_by(GROUP) {
-                        let gn = GROUP.min(end - g0);
-                        // −2q in f32 (exact doubling); missing queries of
-                        // the last group are zeros.
-                        c.fill(0.0);
-                        for g in 0..gn {
-                            let qi = &q_rows[(g0 + g) * d..(g0 + g + 1) * d];
-                            for (cj, &v) in c[g * d..(g + 1) * d].iter_mut().zip(qi) {
-                                *cj = -2.0 * (v as f32);
-                            }
-                        }
-                        let best = fused_scores(
-                            &self.panels,
-                            &self.panel_norms,
-                            d,
-                            &c[..GROUP * d],
-                            scores,
-                        );
-                        for (g, &b) in best.iter().enumerate().take(gn) {
-                            let qi = &q_rows[(g0 + g) * d..(g0 + g + 1) * d];
-                            let q_norm: f64 = qi.iter().map(|v| v * v).sum();
-                            let band = 2.0 * fused_err(d, q_norm, self.x_norm_max);
-                            let col = &scores[g * np * PANEL..(g + 1) * np * PANEL];
-                            out.push(fused_pick(&self.x_rows, col, nx, b, qi, band));
-                        }
-                    }
-                });
-                out
+                let rows = q0..(q0 + FUSED_BLOCK).min(nq);
+                if wide {
+                    self.fused_block::<WIDE_GROUP>(&q_rows, rows)
+                } else {
+                    self.fused_block::<GROUP>(&q_rows, rows)
+                }
             })
             .collect();
         blocks.into_iter().flatten().collect()
+    }
+
+    /// [`BruteData::search_fused`] for the queries `rows` (of the
+    /// row-major `q_rows`), `G` at a time.
+    fn fused_block<const G: usize>(
+        &self,
+        q_rows: &[f64],
+        rows: std::ops::Range<usize>,
+    ) -> Vec<usize> {
+        let (nx, d) = (self.x_norm.len(), self.d);
+        let np = nx.div_ceil(PANEL);
+        let mut out = Vec::with_capacity(rows.len());
+        SCORES.with_borrow_mut(|buf| {
+            if buf.len() < G * np * PANEL {
+                buf.resize(G * np * PANEL, 0.0);
+            }
+            let scores = &mut buf[..G * np * PANEL];
+            let mut c = [0.0f32; WIDE_GROUP * FUSED_MAX_DIM];
+            let c = &mut c[..G * d];
+            for g0 in rows.clone().step_by(G) {
+                let gn = G.min(rows.end - g0);
+                // −2q in f32 (exact doubling), coordinate by coordinate;
+                // missing queries of the last group are zeros.
+                c.fill(0.0);
+                for g in 0..gn {
+                    let qi = &q_rows[(g0 + g) * d..(g0 + g + 1) * d];
+                    for (j, &v) in qi.iter().enumerate() {
+                        c[j * G + g] = -2.0 * (v as f32);
+                    }
+                }
+                let best = fused_scores::<G>(&self.panels, &self.panel_norms, d, c, scores);
+                for (g, &b) in best.iter().enumerate().take(gn) {
+                    let qi = &q_rows[(g0 + g) * d..(g0 + g + 1) * d];
+                    let q_norm: f64 = qi.iter().map(|v| v * v).sum();
+                    let band = 2.0 * fused_err(d, q_norm, self.x_norm_max);
+                    let col = &scores[g * np * PANEL..(g + 1) * np * PANEL];
+                    out.push(fused_pick(&self.x_rows, col, nx, b, qi, band));
+                }
+            }
+        });
+        out
     }
 
     /// The nearest data row of every query (same width as the data).
@@ -371,54 +388,52 @@ pub(crate) fn fused_err(d: usize, q_norm: f64, x_norm_max: f64) -> f64 {
         + tiny * (2.0 * df.sqrt() * (q_norm.sqrt() + x_norm_max.sqrt()) + 2.0 * df + 1.0))
 }
 
-/// The fused search's products: the scores of [`GROUP`] queries (`c`:
-/// their coordinates times −2, query by query, `d` each) against every
-/// panel, written to `scores` (query by query, `norms.len()` each), and
-/// each query's smallest score. Sums run in coordinate order from the
-/// norm; with AVX2 or AVX-512 each product and sum is one fused
-/// multiply-add (one rounding instead of two: [`fused_err`] covers both).
-fn fused_scores(
+/// The fused search's products: the scores of `G` queries (`c`: their
+/// coordinates times −2, coordinate by coordinate: `c[j * G + g]` is
+/// coordinate `j` of query `g`) against every panel, written to `scores`
+/// (query by query, `norms.len()` each), and each query's smallest score.
+/// Sums run in coordinate order from the norm; with AVX2 or AVX-512 each
+/// product and sum is one fused multiply-add (one rounding instead of two:
+/// [`fused_err`] covers both). `G` is [`WIDE_GROUP`] with AVX-512 (its
+/// kernel), else [`GROUP`]; the group size only changes how many queries
+/// share a load of the panel, never a score.
+fn fused_scores<const G: usize>(
     panels: &[f32],
     norms: &[f32],
     d: usize,
     c: &[f32],
     scores: &mut [f32],
-) -> [f32; GROUP] {
+) -> [f32; G] {
     #[cfg(target_arch = "x86_64")]
     {
-        #[target_feature(enable = "avx512f,avx512bw,avx512vl,avx2,fma,bmi1,bmi2,popcnt,lzcnt")]
-        fn v4(
-            panels: &[f32],
-            norms: &[f32],
-            d: usize,
-            c: &[f32],
-            scores: &mut [f32],
-        ) -> [f32; GROUP] {
-            fused_scores_body::<true>(panels, norms, d, c, scores)
-        }
         #[target_feature(enable = "avx2,fma,bmi1,bmi2,popcnt,lzcnt")]
-        fn v3(
-            panels: &[f32],
-            norms: &[f32],
-            d: usize,
-            c: &[f32],
-            scores: &mut [f32],
-        ) -> [f32; GROUP] {
+        fn v3(panels: &[f32], norms: &[f32], d: usize, c: &[f32], scores: &mut [f32]) -> [f32; 4] {
             fused_scores_body::<true>(panels, norms, d, c, scores)
         }
-        if crate::cpu::has_v4() {
+        let mut best = [f32::INFINITY; G];
+        if G == WIDE_GROUP && crate::cpu::has_v4() {
             // SAFETY: the CPU has the features (runtime check).
-            return unsafe { v4(panels, norms, d, c, scores) };
+            let b = unsafe { fused_scores_avx512(panels, norms, d, c, scores) };
+            best.copy_from_slice(&b);
+            return best;
         }
-        if crate::cpu::has_v3() {
+        if G == GROUP && crate::cpu::has_v3() {
             // SAFETY: as above.
-            return unsafe { v3(panels, norms, d, c, scores) };
+            best.copy_from_slice(&unsafe { v3(panels, norms, d, c, scores) });
+            return best;
         }
     }
-    fused_scores_body::<false>(panels, norms, d, c, scores)
+    assert_eq!(
+        G, GROUP,
+        "the portable kernel scores {GROUP} queries at a time"
+    );
+    let mut best = [f32::INFINITY; G];
+    best.copy_from_slice(&fused_scores_body::<false>(panels, norms, d, c, scores));
+    best
 }
 
-/// [`fused_scores`] with (`FMA`) or without fused multiply-adds.
+/// [`fused_scores`] for [`GROUP`] queries, with (`FMA`) or without fused
+/// multiply-adds.
 #[inline(always)]
 pub(crate) fn fused_scores_body<const FMA: bool>(
     panels: &[f32],
@@ -430,7 +445,6 @@ pub(crate) fn fused_scores_body<const FMA: bool>(
     const { assert!(GROUP == 4) };
     let n = norms.len();
     let mut lanes = [[f32::INFINITY; PANEL]; GROUP];
-    let (c0, c1, c2, c3) = (&c[..d], &c[d..2 * d], &c[2 * d..3 * d], &c[3 * d..4 * d]);
     let madd = |a: f32, b: f32, acc: f32| if FMA { a.mul_add(b, acc) } else { acc + a * b };
     for (p, (xp, np)) in panels
         .chunks_exact(d * PANEL)
@@ -439,9 +453,9 @@ pub(crate) fn fused_scores_body<const FMA: bool>(
     {
         let np: &[f32; PANEL] = np.try_into().expect("panel");
         let (mut a0, mut a1, mut a2, mut a3) = (*np, *np, *np, *np);
-        for (j, x) in xp.chunks_exact(PANEL).enumerate() {
+        for (x, k) in xp.chunks_exact(PANEL).zip(c.chunks_exact(GROUP)) {
             let x: &[f32; PANEL] = x.try_into().expect("panel");
-            let (k0, k1, k2, k3) = (c0[j], c1[j], c2[j], c3[j]);
+            let (k0, k1, k2, k3) = (k[0], k[1], k[2], k[3]);
             for l in 0..PANEL {
                 a0[l] = madd(k0, x[l], a0[l]);
                 a1[l] = madd(k1, x[l], a1[l]);
@@ -463,6 +477,49 @@ pub(crate) fn fused_scores_body<const FMA: bool>(
         }
     }
     best
+}
+
+/// [`fused_scores`] for [`WIDE_GROUP`] queries with AVX-512: one register
+/// per query (eight independent sums keep both FMA units busy), the same
+/// fused multiply-adds in the same order as [`fused_scores_body`] (so
+/// the same scores, bit for bit).
+///
+/// # Safety
+///
+/// The CPU must have AVX-512F.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f,avx512bw,avx512vl,avx2,fma")]
+pub(crate) unsafe fn fused_scores_avx512(
+    panels: &[f32],
+    norms: &[f32],
+    d: usize,
+    c: &[f32],
+    scores: &mut [f32],
+) -> [f32; WIDE_GROUP] {
+    use std::arch::x86_64::*;
+    const { assert!(PANEL == 16) };
+    let n = norms.len();
+    let np = n / PANEL;
+    assert!(panels.len() >= np * d * PANEL && c.len() >= d * WIDE_GROUP);
+    assert!(scores.len() >= WIDE_GROUP * n);
+    let mut lanes = [_mm512_set1_ps(f32::INFINITY); WIDE_GROUP];
+    for p in 0..np {
+        // SAFETY (all loads and stores): in bounds by the asserts above.
+        let mut a = [unsafe { _mm512_loadu_ps(norms.as_ptr().add(p * PANEL)) }; WIDE_GROUP];
+        let xp = unsafe { panels.as_ptr().add(p * d * PANEL) };
+        for j in 0..d {
+            let x = unsafe { _mm512_loadu_ps(xp.add(j * PANEL)) };
+            let k = &c[j * WIDE_GROUP..(j + 1) * WIDE_GROUP];
+            for (ag, &kg) in a.iter_mut().zip(k) {
+                *ag = _mm512_fmadd_ps(_mm512_set1_ps(kg), x, *ag);
+            }
+        }
+        for (g, (ag, lg)) in a.iter().zip(lanes.iter_mut()).enumerate() {
+            unsafe { _mm512_storeu_ps(scores.as_mut_ptr().add(g * n + p * PANEL), *ag) };
+            *lg = _mm512_min_ps(*ag, *lg);
+        }
+    }
+    lanes.map(|l| _mm512_reduce_min_ps(l))
 }
 
 crate::cpu::dispatched! {

@@ -7,6 +7,7 @@
 //! contraction, the same summation order (kernels written with intrinsics
 //! say where they differ).
 
+#[cfg(target_arch = "x86_64")]
 use std::sync::OnceLock;
 use std::sync::atomic::{AtomicU8, Ordering};
 

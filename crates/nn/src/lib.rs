@@ -6,7 +6,7 @@
 //! distance, so the result is the true nearest row in f64 (ties: the
 //! smallest index). Memory is bounded by the block size, never
 //! n_queries x n_data. In up to 32 dimensions brute force scores in one
-//! fused kernel instead (four queries against sixteen rows in registers,
+//! fused kernel instead (four queries, eight with AVX-512, against sixteen rows in registers,
 //! one multiply-add per coordinate, its own band: `fused_err`).
 //!
 //! In high dimensions most of that work can be skipped ([`NnStrategy::Prefix`]):

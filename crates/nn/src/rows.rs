@@ -7,6 +7,7 @@ use rayon::prelude::*;
 
 /// The rows of a matrix, each contiguous: read in place from a view whose
 /// column stride is 1, else copied row-major (in parallel).
+#[cfg_attr(not(target_arch = "x86_64"), allow(dead_code))] // read by the tiles only
 pub(crate) struct Rows<'a> {
     ptr: *const f64,
     stride: usize,
@@ -54,6 +55,7 @@ impl<'a> Rows<'a> {
 
     /// Row `i`.
     #[inline(always)]
+    #[cfg_attr(not(target_arch = "x86_64"), allow(dead_code))] // the tiles' reader
     pub(crate) fn row(&self, i: usize) -> &[f64] {
         assert!(i < self.n, "row {i} of {}", self.n);
         // SAFETY: row i's d elements are elements of the view (column

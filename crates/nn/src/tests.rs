@@ -5,6 +5,8 @@ use nalgebra::DMatrix;
 use crate::brute::{
     BruteData, GROUP, PANEL, brute_search, fused_err, fused_scores_body, power_of_two_scale,
 };
+#[cfg(target_arch = "x86_64")]
+use crate::brute::{WIDE_GROUP, fused_scores_avx512};
 use crate::prefix::{prefix_search, prefix_search_with};
 use crate::rows::{dist2, row_major};
 use crate::tree::tree_search;
@@ -155,38 +157,80 @@ fn fused_scores_are_within_their_bound() {
             scale * (((i * 53 + j * 7) % 97) as f64 / 48.0 - 1.0 + (j as f64).cos() * 1e-3)
         });
         let data = BruteData::new(&x);
-        let np = nx.div_ceil(PANEL);
-        let mut c = vec![0.0f32; GROUP * d];
-        for g in 0..nq {
-            for j in 0..d {
-                c[g * d + j] = -2.0 * (q[(g, j)] as f32);
-            }
-        }
         let x_norm_max = (0..nx).map(|r| x.row(r).norm_squared()).fold(0.0, f64::max);
-        for fma in [false, true] {
-            let mut scores = vec![0.0f32; GROUP * np * PANEL];
+        let four = check_fused::<GROUP>(&x, &q, x_norm_max, scale, &|fma, c, out| {
             let best = if fma {
-                fused_scores_body::<true>(&data.panels, &data.panel_norms, d, &c, &mut scores)
+                fused_scores_body::<true>(&data.panels, &data.panel_norms, d, c, out)
             } else {
-                fused_scores_body::<false>(&data.panels, &data.panel_norms, d, &c, &mut scores)
+                fused_scores_body::<false>(&data.panels, &data.panel_norms, d, c, out)
             };
-            for g in 0..nq {
-                let q_norm = q.row(g).norm_squared();
-                let bound = fused_err(d, q_norm, x_norm_max) / 2.0;
-                let col = &scores[g * np * PANEL..(g + 1) * np * PANEL];
-                for r in 0..nx {
-                    let exact = x.row(r).norm_squared() - 2.0 * x.row(r).dot(&q.row(g));
-                    let err = (f64::from(col[r]) - exact).abs();
-                    assert!(
-                        err <= bound,
-                        "d {d} scale {scale:e} fma {fma}: {err:e} > {bound:e}"
-                    );
-                }
-                // The padding never scores, and the best is the smallest.
-                assert!(col[nx..].iter().all(|s| *s == f32::INFINITY));
-                let min = col.iter().fold(f32::INFINITY, |a, &b| a.min(b));
-                assert_eq!(best[g], min);
-            }
+            best.to_vec()
+        });
+        #[cfg(target_arch = "x86_64")]
+        if crate::cpu::SimdLevel::Avx512.detected() {
+            // The AVX-512 kernel (fused multiply-adds only) gives the same
+            // scores as the portable one with them, bit for bit.
+            let eight = check_fused::<WIDE_GROUP>(&x, &q, x_norm_max, scale, &|_, c, out| {
+                // SAFETY: the CPU has AVX-512 (checked above).
+                unsafe { fused_scores_avx512(&data.panels, &data.panel_norms, d, c, out) }.to_vec()
+            });
+            assert_eq!(four, eight, "d {d} scale {scale:e}");
+        } else {
+            eprintln!("skipped: the AVX-512 fused kernel (this CPU has no AVX-512)");
+        }
+        #[cfg(not(target_arch = "x86_64"))]
+        {
+            let _ = four;
+            eprintln!("skipped: the AVX-512 fused kernel (not an x86-64 CPU)");
         }
     }
+}
+
+/// A fused kernel: `(fma, c, scores) -> best`.
+type Kernel<'a> = dyn Fn(bool, &[f32], &mut [f32]) -> Vec<f32> + 'a;
+
+/// [`fused_scores_are_within_their_bound`] for a kernel of `G` queries
+/// (`q` has at most `G` rows; the rest of the group is zeros); returns
+/// the queries' scores with fused multiply-adds.
+fn check_fused<const G: usize>(
+    x: &DMatrix<f64>,
+    q: &DMatrix<f64>,
+    x_norm_max: f64,
+    scale: f64,
+    kernel: &Kernel<'_>,
+) -> Vec<f32> {
+    let (nx, d, nq) = (x.nrows(), x.ncols(), q.nrows());
+    let np = nx.div_ceil(PANEL);
+    let mut c = vec![0.0f32; G * d];
+    for g in 0..nq {
+        for j in 0..d {
+            c[j * G + g] = -2.0 * (q[(g, j)] as f32);
+        }
+    }
+    let mut fused = Vec::new();
+    for fma in [false, true] {
+        let mut scores = vec![0.0f32; G * np * PANEL];
+        let best = kernel(fma, &c, &mut scores);
+        for g in 0..nq {
+            let q_norm = q.row(g).norm_squared();
+            let bound = fused_err(d, q_norm, x_norm_max) / 2.0;
+            let col = &scores[g * np * PANEL..(g + 1) * np * PANEL];
+            for r in 0..nx {
+                let exact = x.row(r).norm_squared() - 2.0 * x.row(r).dot(&q.row(g));
+                let err = (f64::from(col[r]) - exact).abs();
+                assert!(
+                    err <= bound,
+                    "d {d} scale {scale:e} fma {fma}: {err:e} > {bound:e}"
+                );
+            }
+            // The padding never scores, and the best is the smallest.
+            assert!(col[nx..].iter().all(|s| *s == f32::INFINITY));
+            let min = col.iter().fold(f32::INFINITY, |a, &b| a.min(b));
+            assert_eq!(best[g], min);
+        }
+        if fma {
+            fused = scores[..nq * np * PANEL].to_vec();
+        }
+    }
+    fused
 }
