@@ -2,7 +2,7 @@
 //! typed sizes, outputs that must not clobber anything, inputs too small.
 
 mod common;
-use common::{fmaps, json_of, refused, tmpdir};
+use common::{fmaps, json_of, refused, run_in, tmpdir};
 
 /// The built-in pair at `subdivisions`, written as a.off and b.off.
 fn write_pair(dir: &std::path::Path, subdivisions: u32) -> fmaps::mesh_io::generate::MeshPair {
@@ -85,18 +85,7 @@ fn typed_sizes_are_bounded() {
         "--threads",
         "1",
     ];
-    let run = |extra: &[&str]| {
-        let out = fmaps()
-            .current_dir(&dir)
-            .args(m)
-            .args(extra)
-            .output()
-            .unwrap();
-        (
-            out.status.code(),
-            String::from_utf8_lossy(&out.stderr).into_owned(),
-        )
-    };
+    let run = |extra: &[&str]| run_in(&dir, &m, extra);
     for (extra, needle) in [
         (vec!["--n-descr", "18446744073709551615"], "only repeat"),
         (vec!["--n-descr", "100000"], "only repeat"),
@@ -137,18 +126,7 @@ fn outputs_are_atomic_and_never_clobber_inputs() {
         "--n-descr",
         "10",
     ];
-    let run = |extra: &[&str]| {
-        let out = fmaps()
-            .current_dir(&dir)
-            .args(m)
-            .args(extra)
-            .output()
-            .unwrap();
-        (
-            out.status.code(),
-            String::from_utf8_lossy(&out.stderr).into_owned(),
-        )
-    };
+    let run = |extra: &[&str]| run_in(&dir, &m, extra);
     let (code, err) = run(&["--out", "a.off"]);
     assert_eq!(code, Some(2), "{err}");
     assert!(err.contains("overwrite the input"), "{err}");

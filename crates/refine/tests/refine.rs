@@ -94,6 +94,21 @@ fn pair(k: usize, deformed: bool) -> Pair {
 
 /// Mean Euclidean distance on A between the predicted and the true image
 /// of every vertex of B.
+/// [`error`] of the nearest-neighbour point map of the functional map `c`.
+fn fmap_error(p: &Pair, c: &DMatrix<f64>) -> f64 {
+    error(p, &point_map_from_fmap(c, &p.basis_a, &p.basis_b).unwrap())
+}
+
+/// ZoomOut from `k_start` to `k_final` in steps of 2, else the defaults.
+fn zoomout(k_start: usize, k_final: usize) -> ZoomOut {
+    ZoomOut {
+        k_start,
+        k_final,
+        step: 2,
+        ..ZoomOut::default()
+    }
+}
+
 fn error(p: &Pair, t_ba: &[usize]) -> f64 {
     let va = p.a.vertices();
     let s: f64 = t_ba
@@ -156,18 +171,8 @@ fn zoomout_recovers_a_low_rank_truncation() {
     // map; ZoomOut to 60 recovers most of it.
     let p = pair(60, true);
     let c6 = true_fmap(&p, 6);
-    let before = error(
-        &p,
-        &point_map_from_fmap(&c6, &p.basis_a, &p.basis_b).unwrap(),
-    );
-    let zo = ZoomOut {
-        k_start: 6,
-        k_final: 60,
-        step: 2,
-        ..ZoomOut::default()
-    }
-    .refine(&c6, &p.basis_a, &p.basis_b)
-    .unwrap();
+    let before = fmap_error(&p, &c6);
+    let zo = zoomout(6, 60).refine(&c6, &p.basis_a, &p.basis_b).unwrap();
     let after = error(&p, &zo.t_ba);
     assert!(after < 0.2 * before, "before {before}, after {after}");
     // The iterations shrink the changes of the point map.
@@ -179,22 +184,14 @@ fn zoomout_recovers_a_low_rank_truncation() {
 fn refiners_reduce_the_error_of_a_noisy_map() {
     let p = pair(60, true);
     let c = noisy(&true_fmap(&p, 20), 0.15, 7);
-    let before = error(
-        &p,
-        &point_map_from_fmap(&c, &p.basis_a, &p.basis_b).unwrap(),
-    );
+    let before = fmap_error(&p, &c);
     let icp = Icp::default().refine(&c, &p.basis_a, &p.basis_b).unwrap();
     let e_icp = error(&p, &icp.t_ba);
     // ICP returns an orthonormal map.
     let ctc = icp.c_ab.tr_mul(&icp.c_ab);
     assert!((ctc - DMatrix::identity(20, 20)).amax() < 1e-10);
     let zo = |z: ZoomOut| error(&p, &z.refine(&c, &p.basis_a, &p.basis_b).unwrap().t_ba);
-    let base = ZoomOut {
-        k_start: 20,
-        k_final: 60,
-        step: 2,
-        ..ZoomOut::default()
-    };
+    let base = zoomout(20, 60);
     let e_zo = zo(base.clone());
     let e_adj = zo(ZoomOut {
         adjoint: true,
@@ -219,16 +216,8 @@ fn refiners_reduce_the_error_of_a_noisy_map() {
 fn subsampled_zoomout_is_close_to_the_full_one() {
     let p = pair(60, true);
     let c = noisy(&true_fmap(&p, 20), 0.15, 7);
-    let before = error(
-        &p,
-        &point_map_from_fmap(&c, &p.basis_a, &p.basis_b).unwrap(),
-    );
-    let base = ZoomOut {
-        k_start: 20,
-        k_final: 60,
-        step: 2,
-        ..ZoomOut::default()
-    };
+    let before = fmap_error(&p, &c);
+    let base = zoomout(20, 60);
     let full = error(&p, &base.refine(&c, &p.basis_a, &p.basis_b).unwrap().t_ba);
     let sub = Subsample {
         a: farthest_point_sampling(p.a.vertices(), 500, 0),
@@ -487,10 +476,7 @@ fn discrete_optimisation_presets() {
         assert_eq!(r.t_ba, exact.t_ba, "{preset}");
     }
 
-    let before = error(
-        &p,
-        &point_map_from_fmap(&c, &p.basis_a, &p.basis_b).unwrap(),
-    );
+    let before = fmap_error(&p, &c);
     for preset in ["bijective-zoomout", "discrete"] {
         let r = discrete(preset, 20, 60, 4)
             .refine(&c, &p.basis_a, &p.basis_b)
@@ -528,10 +514,7 @@ fn the_repair_keeps_an_exact_map_and_repairs_a_noisy_one() {
     // half the error and (permutation equivariance) to the true
     // renumbering wherever the map is right.
     let c = noisy(&true_fmap(&p, 20), 0.15, 7);
-    let before = error(
-        &p,
-        &point_map_from_fmap(&c, &p.basis_a, &p.basis_b).unwrap(),
-    );
+    let before = fmap_error(&p, &c);
     let r = Repair::default()
         .refine_with_geometry(&c, &p.basis_a, &p.basis_b, geometry(&p.a), geometry(&p.b))
         .unwrap();

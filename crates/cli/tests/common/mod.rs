@@ -35,6 +35,20 @@ where
     err
 }
 
+/// Runs `fmaps BASE EXTRA` in `dir`; returns its exit code and stderr.
+pub fn run_in(dir: &std::path::Path, base: &[&str], extra: &[&str]) -> (Option<i32>, String) {
+    let out = fmaps()
+        .current_dir(dir)
+        .args(base)
+        .args(extra)
+        .output()
+        .unwrap();
+    (
+        out.status.code(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
 /// A unit square grid (25 vertices, area 1) in `dir`: g.off, the
 /// identity as ground truth g.vts and map id.map, and shift.map, one step
 /// (0.25) to the right except on the last column (mean error 0.25 * 20/25).
