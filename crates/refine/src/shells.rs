@@ -41,8 +41,9 @@
 //! Between shapes that are not near-isometric (different builds) the
 //! surrogate's two best orientations often miss the right one;
 //! [`SmoothShells::non_isometric`] screens all eight by a short alignment
-//! and keeps the two whose maps distort area least, and chooses the final
-//! map by area distortion and orientation together.
+//! and keeps the two whose maps distort area least and fold least (area
+//! distortion and orientation score together), and chooses the final map
+//! by the same score.
 //!
 //! Where this differs from the paper's description: the alignment levels
 //! use `samples` farthest-point samples of each shape (the paper's
@@ -146,12 +147,17 @@ pub struct SmoothShells {
     /// equal share of the random ones (the total stays `proposals` x
     /// `orientations`), its best proposal runs a short alignment (12
     /// levels on the initialisation's samples), and the `orientations`
-    /// whose short alignment's map distorts area least
-    /// ([`crate::area_distortion`]) run the whole alignment: a body
-    /// aligned facing backwards, or with a leg on an arm, stretches the
-    /// surface far more than the right alignment even between different
-    /// builds, where the alignment energies are close. About 1.6x the
-    /// time of the default; see [`SmoothShells::non_isometric`].
+    /// whose short alignment's map scores best run the whole alignment:
+    /// with [`Select::AreaAndOrientation`] by the final choice's own score
+    /// (area distortion and orientation score), else by the least area
+    /// distortion ([`crate::area_distortion`]). A body aligned facing
+    /// backwards, or with a leg on an arm, stretches the surface far more
+    /// than the right alignment even between different builds, where the
+    /// alignment energies are close; a map onto the mirror image of the
+    /// right one (left and right swapped: TOSCA's cats, FAUST_r) can
+    /// stretch it as little, but folds over (its orientation score is
+    /// negative). About 1.6x the time of the default; see
+    /// [`SmoothShells::non_isometric`].
     pub screen: usize,
     /// How the final maps of the orientations that ran the whole
     /// alignment are compared.
@@ -196,13 +202,13 @@ impl Default for SmoothShells {
 impl SmoothShells {
     /// The setting for shapes that are not near-isometric (different
     /// people, different animals): all eight rigid orientations screened
-    /// by a short alignment, the two that distort area least aligned in
-    /// full, and the final map chosen by area distortion and orientation
-    /// together ([`Select::AreaAndOrientation`]). About 1.6x the time of
+    /// by a short alignment, the two whose short maps score best by area
+    /// distortion and orientation together aligned in full, and the final
+    /// map chosen by the same score ([`Select::AreaAndOrientation`]). About 1.6x the time of
     /// the default. On the 30 generated non-isometric pairs (README,
     /// exact geodesics) it lowers the mean geodesic error from the
-    /// default's 15.8 x100 to 10.6; on the generated near-isometric pairs
-    /// the two are level (2.42 and 2.41).
+    /// default's 15.8 x100 to 10.7; on the generated near-isometric pairs
+    /// the two are level (2.41 for the default).
     ///
     /// ```
     /// let s = fmaps_refine::SmoothShells::non_isometric();
@@ -476,8 +482,6 @@ impl SmoothShells {
         init: (&Samples, &Samples),
         report: &mut RefineReport,
     ) -> Result<(Alignment, Vec<usize>)> {
-        // A reflected X keeps its faces: its orientation is reversed.
-        let sign = if self.reflect { -1.0 } else { 1.0 };
         type Run = (f64, Alignment, Vec<usize>, RefineReport);
         let runs: Vec<Result<Run>> = finalists
             .into_par_iter()
@@ -496,14 +500,7 @@ impl SmoothShells {
                 let (_, state) = best.expect("at least one finalist");
                 let map = Self::point_map(x, y, &state, self.k_max, &mut rep)?;
                 let score = if xs.len() > 1 {
-                    let o = sign
-                        * crate::orientation_score(&map, &y.verts, y.faces, &x.verts, x.faces)?;
-                    match self.select {
-                        Select::Orientation => o,
-                        Select::AreaAndOrientation => {
-                            o - crate::area_distortion(&map, &y.verts, y.faces, &x.verts, x.faces)?
-                        }
-                    }
+                    self.selection_score(&map, x, y)?
                 } else {
                     0.0
                 };

@@ -1,19 +1,18 @@
 //! The screening of rigid orientations ([`SmoothShells::screen`]): each
 //! orientation's best proposal runs a short alignment, and those whose
-//! maps distort area least go on to the whole alignment.
+//! maps score best go on to the whole alignment.
 
 use nalgebra::DMatrix;
 use rayon::prelude::*;
 
 use super::level::{Alignment, Samples, Shell};
-use super::{SmoothShells, as_start, merge};
+use super::{Select, SmoothShells, as_start, merge};
 use crate::{RefineReport, Result};
 
 impl SmoothShells {
     /// The `orientations` of `xs` whose best proposal, aligned by a short
-    /// schedule (12 levels on the samples `ix`, `iy`), gives the map that
-    /// distorts area least, with their proposals (see
-    /// [`SmoothShells::screen`]).
+    /// schedule (12 levels on the samples `ix`, `iy`), gives the best map
+    /// (see [`SmoothShells::screen`]), with their proposals.
     #[allow(clippy::type_complexity)]
     pub(super) fn screened<'s>(
         &self,
@@ -25,9 +24,8 @@ impl SmoothShells {
         report: &mut RefineReport,
     ) -> Result<(Vec<Shell<'s>>, Vec<Vec<Alignment>>)> {
         let scores = self.quick_scores(&xs, y, &ranked, (ix, iy), gram, report)?;
-        // Least area distortion first (a lower is better: negated).
         let mut order: Vec<(f64, usize)> =
-            scores.iter().enumerate().map(|(o, a)| (-a, o)).collect();
+            scores.iter().enumerate().map(|(o, &a)| (a, o)).collect();
         // Best first; ties (and NaN) keep the surrogate's order.
         order.sort_by(|a, b| b.0.total_cmp(&a.0).then(a.1.cmp(&b.1)));
         let keep: Vec<usize> = order
@@ -48,9 +46,11 @@ impl SmoothShells {
             .unzip())
     }
 
-    /// Per orientation, the area distortion of the map
-    /// its best proposal gives after a short alignment (12 levels on the
-    /// samples `ix`, `iy`); ∞ for an orientation without proposals.
+    /// Per orientation, the score (higher is better) of the map its best
+    /// proposal gives after a short alignment (12 levels on the samples
+    /// `ix`, `iy`): [`SmoothShells::selection_score`] with
+    /// [`Select::AreaAndOrientation`], else minus the area distortion;
+    /// −∞ for an orientation without proposals.
     fn quick_scores(
         &self,
         xs: &[Shell<'_>],
@@ -70,7 +70,7 @@ impl SmoothShells {
             .map(|(x, states)| {
                 let mut rep = RefineReport::start(String::new());
                 let Some(best) = states.first() else {
-                    return Ok((f64::INFINITY, rep));
+                    return Ok((f64::NEG_INFINITY, rep));
                 };
                 let (_, state) = quick.align(
                     x,
@@ -84,7 +84,15 @@ impl SmoothShells {
                 rep.iterations.clear();
                 let map = Self::point_map(x, y, &state, self.k_max, &mut rep)?;
                 let a = crate::area_distortion(&map, &y.verts, y.faces, &x.verts, x.faces)?;
-                Ok((a, rep))
+                let score = match self.select {
+                    // The final choice's own score: an orientation whose
+                    // quick map folds over (a mirror image of the right
+                    // map distorts area as little) is not kept.
+                    Select::AreaAndOrientation => self.selection_score(&map, x, y)?,
+                    // Least area distortion first.
+                    Select::Orientation => -a,
+                };
+                Ok((score, rep))
             })
             .collect();
         let mut out = Vec::with_capacity(scores.len());
@@ -94,5 +102,26 @@ impl SmoothShells {
             out.push(score);
         }
         Ok(out)
+    }
+
+    /// The score by which [`SmoothShells::select`] compares the point map
+    /// `map` of Y onto X with those of other orientations (higher is
+    /// better): the orientation score, minus the area distortion with
+    /// [`Select::AreaAndOrientation`].
+    pub(super) fn selection_score(
+        &self,
+        map: &[usize],
+        x: &Shell<'_>,
+        y: &Shell<'_>,
+    ) -> Result<f64> {
+        // A reflected X keeps its faces: its orientation is reversed.
+        let sign = if self.reflect { -1.0 } else { 1.0 };
+        let o = sign * crate::orientation_score(map, &y.verts, y.faces, &x.verts, x.faces)?;
+        Ok(match self.select {
+            Select::Orientation => o,
+            Select::AreaAndOrientation => {
+                o - crate::area_distortion(map, &y.verts, y.faces, &x.verts, x.faces)?
+            }
+        })
     }
 }
