@@ -24,8 +24,11 @@ impl SmoothShells {
         report: &mut RefineReport,
     ) -> Result<(Vec<Shell<'s>>, Vec<Vec<Alignment>>)> {
         let scores = self.quick_scores(&xs, y, &ranked, (ix, iy), gram, report)?;
-        let mut order: Vec<(f64, usize)> =
-            scores.iter().enumerate().map(|(o, &a)| (a, o)).collect();
+        let mut order: Vec<(f64, usize)> = scores
+            .iter()
+            .enumerate()
+            .map(|(o, &score)| (score, o))
+            .collect();
         // Best first; ties (and NaN) keep the surrogate's order.
         order.sort_by(|a, b| b.0.total_cmp(&a.0).then(a.1.cmp(&b.1)));
         let keep: Vec<usize> = order
@@ -83,14 +86,15 @@ impl SmoothShells {
                 )?;
                 rep.iterations.clear();
                 let map = Self::point_map(x, y, &state, self.k_max, &mut rep)?;
-                let a = crate::area_distortion(&map, &y.verts, y.faces, &x.verts, x.faces)?;
                 let score = match self.select {
                     // The final choice's own score: an orientation whose
                     // quick map folds over (a mirror image of the right
                     // map distorts area as little) is not kept.
                     Select::AreaAndOrientation => self.selection_score(&map, x, y)?,
                     // Least area distortion first.
-                    Select::Orientation => -a,
+                    Select::Orientation => {
+                        -crate::area_distortion(&map, &y.verts, y.faces, &x.verts, x.faces)?
+                    }
                 };
                 Ok((score, rep))
             })
