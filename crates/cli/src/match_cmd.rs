@@ -73,8 +73,9 @@ pub(crate) struct MatchArgs {
     /// The shapes are not near-isometric (different people, different
     /// animals, different builds): Smooth Shells screens all eight rigid
     /// orientations by a short alignment and chooses the final map by area
-    /// distortion and orientation together (about 1.6x the time; README's
-    /// accuracy table, column `non-isometric`). Other refinements ignore
+    /// distortion and orientation together (about the default's time: its
+    /// initialisation runs on fewer samples; README's accuracy table,
+    /// column `non-isometric`). Other refinements ignore
     /// it.
     #[arg(long)]
     non_isometric: bool,

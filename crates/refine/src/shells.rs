@@ -43,7 +43,9 @@
 //! [`SmoothShells::non_isometric`] screens all eight by a short alignment
 //! and keeps the two whose maps distort area least and fold least (area
 //! distortion and orientation score together), and chooses the final map
-//! by the same score.
+//! by the same score; its initialisation runs on 500 samples with 30
+//! random proposals per aligned orientation, so that it costs about the
+//! default's time.
 //!
 //! Where this differs from the paper's description: the alignment levels
 //! use `samples` farthest-point samples of each shape (the paper's
@@ -156,8 +158,7 @@ pub struct SmoothShells {
     /// alignment energies are close; a map onto the mirror image of the
     /// right one (left and right swapped: TOSCA's cats, FAUST_r) can
     /// stretch it as little, but folds over (its orientation score is
-    /// negative). About 1.6x the time of the default; see
-    /// [`SmoothShells::non_isometric`].
+    /// negative). See [`SmoothShells::non_isometric`].
     pub screen: usize,
     /// How the final maps of the orientations that ran the whole
     /// alignment are compared.
@@ -195,30 +196,6 @@ impl Default for SmoothShells {
             sign_hypotheses: 4,
             screen: 0,
             select: Select::Orientation,
-        }
-    }
-}
-
-impl SmoothShells {
-    /// The setting for shapes that are not near-isometric (different
-    /// people, different animals): all eight rigid orientations screened
-    /// by a short alignment, the two whose short maps score best by area
-    /// distortion and orientation together aligned in full, and the final
-    /// map chosen by the same score ([`Select::AreaAndOrientation`]). About 1.6x the time of
-    /// the default. On the 30 generated non-isometric pairs (README,
-    /// exact geodesics) it lowers the mean geodesic error from the
-    /// default's 15.8 x100 to 10.7; on the generated near-isometric pairs
-    /// the two are level (2.41 for the default).
-    ///
-    /// ```
-    /// let s = fmaps_refine::SmoothShells::non_isometric();
-    /// assert_eq!((s.screen, s.orientations), (8, 2));
-    /// ```
-    pub fn non_isometric() -> SmoothShells {
-        SmoothShells {
-            screen: 8,
-            select: Select::AreaAndOrientation,
-            ..SmoothShells::default()
         }
     }
 }

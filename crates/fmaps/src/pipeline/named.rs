@@ -130,8 +130,8 @@ pub struct RefineOptions {
     pub mirrored: bool,
     /// The shapes are not near-isometric (different people, different
     /// animals): Smooth Shells screens all eight rigid orientations
-    /// ([`crate::refine::SmoothShells::non_isometric`], about 1.6x the
-    /// time). Other refinements ignore it.
+    /// ([`crate::refine::SmoothShells::non_isometric`], about the
+    /// default's time). Other refinements ignore it.
     pub non_isometric: bool,
 }
 
