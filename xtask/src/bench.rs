@@ -36,6 +36,13 @@ pub struct Args {
     /// Skip the ARPACK backend even when the system library is present.
     #[arg(long)]
     no_arpack: bool,
+    /// Timed runs per side and configuration (after one warm-up run each);
+    /// the tables report medians.
+    #[arg(long, default_value_t = 5)]
+    reps: usize,
+    /// Block size of the native solver (default: the solver's own).
+    #[arg(long)]
+    block_size: Option<usize>,
 }
 
 pub fn bench(args: &Args) -> anyhow::Result<()> {
@@ -136,7 +143,8 @@ pub fn bench(args: &Args) -> anyhow::Result<()> {
     }
 
     println!(
-        "\nEigensolve: k smallest eigenpairs of L φ = λ M φ, factorization + iteration, best of {{3 runs below 25k vertices, 1 above}}"
+        "\nEigensolve: k smallest eigenpairs of L φ = λ M φ, factorization + iteration, median of {} runs per side after one warm-up, sides interleaved",
+        args.reps.max(1)
     );
     println!(
         "SciPy: eigsh(L, k, M, sigma=-0.01) (../shared/peers/eigsh.py); ratio = SciPy time / ours; Δλ = max relative eigenvalue difference to SciPy (λ_1..λ_k-1)"
@@ -158,19 +166,45 @@ pub fn bench(args: &Args) -> anyhow::Result<()> {
     );
     for (path, mesh) in &meshes {
         let n = mesh.n_vertices();
-        let reps = if n < 25_000 { 3 } else { 1 };
+        let reps = args.reps.max(1);
         for &k in &args.ks {
             for &thr in &args.threads {
-                let scipy = python
-                    .as_ref()
-                    .map(|py| best_of(reps, || scipy_eigsh(py, path, k, thr)))
-                    .transpose()?;
-                let native = best_of(reps, || ours(&fmaps_bin, path, k, thr, "native"))?;
-                let arp = if arpack {
-                    Some(best_of(reps, || ours(&fmaps_bin, path, k, thr, "arpack"))?)
-                } else {
-                    None
+                // One warm-up run of each side (page cache, CPU frequency),
+                // then the sides interleaved run by run so that a slow spell
+                // of the machine hits both; each side's median.
+                let mut sides: Vec<(&str, Vec<Solve>)> = Vec::new();
+                if python.is_some() {
+                    sides.push(("scipy", Vec::new()));
+                }
+                sides.push(("native", Vec::new()));
+                if arpack {
+                    sides.push(("arpack", Vec::new()));
+                }
+                for round in 0..=reps {
+                    for (side, runs) in &mut sides {
+                        let s = match *side {
+                            "scipy" => scipy_eigsh(
+                                python.as_deref().context("no peer python")?,
+                                path,
+                                k,
+                                thr,
+                            )?,
+                            b => ours(&fmaps_bin, path, k, thr, b, args.block_size)?,
+                        };
+                        if round > 0 {
+                            runs.push(s);
+                        }
+                    }
+                }
+                let mut take = |name: &str| {
+                    sides
+                        .iter_mut()
+                        .find(|(s, _)| *s == name)
+                        .map(|(_, runs)| median(std::mem::take(runs)))
                 };
+                let scipy = take("scipy");
+                let native = take("native").context("no native runs")?;
+                let arp = take("arpack");
                 let ratio = |o: &Solve| {
                     scipy
                         .as_ref()
@@ -241,34 +275,41 @@ impl Solve {
     }
 }
 
-fn best_of(reps: usize, mut f: impl FnMut() -> anyhow::Result<Solve>) -> anyhow::Result<Solve> {
-    let mut best = f()?;
-    for _ in 1..reps {
-        let s = f()?;
-        if s.seconds < best.seconds {
-            best = Solve {
-                peak_mb: best.peak_mb.max(s.peak_mb),
-                ..s
-            };
-        }
+/// The run of median time (upper median for an even count); peak memory
+/// is the largest of all runs.
+fn median(mut runs: Vec<Solve>) -> Solve {
+    let peak = runs.iter().map(|r| r.peak_mb).fold(0.0, f64::max);
+    runs.sort_by(|a, b| a.seconds.total_cmp(&b.seconds));
+    let mid = runs.swap_remove(runs.len() / 2);
+    Solve {
+        peak_mb: peak,
+        ..mid
     }
-    Ok(best)
 }
 
-fn ours(bin: &Path, mesh: &Path, k: usize, threads: usize, backend: &str) -> anyhow::Result<Solve> {
-    let r = run(Command::new(bin)
-        .arg("spectrum")
-        .arg(mesh)
-        .args([
-            "--k",
-            &k.to_string(),
-            "--threads",
-            &threads.to_string(),
-            "--backend",
-            backend,
-            "--json",
-        ])
-        // ARPACK's BLAS calls go to OpenBLAS: same thread count as the rest.
+fn ours(
+    bin: &Path,
+    mesh: &Path,
+    k: usize,
+    threads: usize,
+    backend: &str,
+    block_size: Option<usize>,
+) -> anyhow::Result<Solve> {
+    let mut cmd = Command::new(bin);
+    cmd.arg("spectrum").arg(mesh).args([
+        "--k",
+        &k.to_string(),
+        "--threads",
+        &threads.to_string(),
+        "--backend",
+        backend,
+        "--json",
+    ]);
+    if let Some(b) = block_size.filter(|_| backend == "native") {
+        cmd.args(["--block-size", &b.to_string()]);
+    }
+    // ARPACK's BLAS calls go to OpenBLAS: same thread count as the rest.
+    let r = run(cmd
         .env("OPENBLAS_NUM_THREADS", threads.to_string())
         .env("OMP_NUM_THREADS", threads.to_string()))?;
     let v: Value = serde_json::from_str(&r.stdout)?;
