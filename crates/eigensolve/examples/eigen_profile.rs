@@ -1,7 +1,7 @@
 //! Times the native backend on one mesh, several runs, one thread by
 //! default: `cargo run --release -p fmaps-eigensolve --example eigen_profile
-//! -- MESH.off [K] [RUNS] [SUBSPACE] [BLOCK] [THREADS]` (SUBSPACE 0: the
-//! default). Prints each run's iteration and total seconds and the median.
+//! -- MESH.off [K] [RUNS] [SUBSPACE] [BLOCK] [THREADS]` (SUBSPACE or BLOCK
+//! 0: the solver's default). Prints each run's iteration and total seconds and the median.
 use fmaps_eigensolve::{EigenProblem, EigenSolver, NativeParams, NativeSolver};
 use fmaps_laplacian::{LaplacianParams, cotan_laplacian};
 use std::time::Instant;
@@ -15,15 +15,20 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         Ok(args.get(i).map(|s| s.parse()).transpose()?.unwrap_or(d))
     };
     let (k, runs, sub, block, threads) =
-        (arg(1, 200)?, arg(2, 5)?, arg(3, 0)?, arg(4, 8)?, arg(5, 1)?);
+        (arg(1, 200)?, arg(2, 5)?, arg(3, 0)?, arg(4, 0)?, arg(5, 1)?);
     let mesh = fmaps_mesh_io::read_mesh(path)?;
     let op = cotan_laplacian(&mesh, &LaplacianParams::default());
     let problem = EigenProblem::new(op.stiffness.view(), &op.mass)?;
+    let defaults = NativeParams::default();
     let solver = NativeSolver::new(NativeParams {
         subspace: (sub > 0).then_some(sub),
-        block_size: block,
+        block_size: if block > 0 {
+            block
+        } else {
+            defaults.block_size
+        },
         threads,
-        ..NativeParams::default()
+        ..defaults
     });
     let mut totals = Vec::new();
     for run in 0..=runs {
