@@ -232,7 +232,7 @@ pub fn bench_refine(args: &Args) -> anyhow::Result<()> {
         basis_1.n()
     );
     println!(
-        "{:>4} {:>11} {:>11} {:>12} {:>11} {:>11} {:>13} {:>13} {:>11} {:>9} {:>9}  agree",
+        "{:>4} {:>11} {:>11} {:>12} {:>11} {:>11} {:>13} {:>14} {:>13} {:>11} {:>9} {:>9}  agree",
         "k",
         "fmaps tree",
         "fmaps brute",
@@ -240,10 +240,18 @@ pub fn bench_refine(args: &Args) -> anyhow::Result<()> {
         "fmaps tiles",
         "fmaps auto",
         "auto+guesses",
+        "balls+guesses",
         "sklearn brute",
         "cKDTree",
         "vs sklearn",
         "vs cKDTree"
+    );
+    // The clusters of B's rows for the ball search, once (as ZoomOut and
+    // ICP compute them once per shape; not timed).
+    let partition = fmaps::nn::Partition::kmeans(
+        view(&basis_1.eigenvectors),
+        fmaps::nn::BALL_SIZE,
+        fmaps::nn::KMEANS_STEPS,
     );
     let mut nn_rows = Vec::new();
     for k in [10usize, 30, 50, 100, 150, 200] {
@@ -291,6 +299,17 @@ pub fn bench_refine(args: &Args) -> anyhow::Result<()> {
                 nearest(&data, &queries, Some(&guess), NnStrategy::Auto)
             })
         });
+        let (t_balls, i_balls) = pool.install(|| {
+            time(args.bench.repeat, || {
+                fmaps::nn::nearest_rows(
+                    view(&data),
+                    view(&queries),
+                    Some(&guess),
+                    &NnParams::with_strategy(NnStrategy::Balls).with_partition(partition.clone()),
+                )
+                .expect("rows of equal length")
+            })
+        });
         let (dp, qp) = (
             work.join(format!("data{k}.npy")),
             work.join(format!("query{k}.npy")),
@@ -302,7 +321,8 @@ pub fn bench_refine(args: &Args) -> anyhow::Result<()> {
             && i_prefix == i_brute
             && i_tiles == i_brute
             && i_auto == i_brute
-            && i_hinted == i_brute;
+            && i_hinted == i_brute
+            && i_balls == i_brute;
         for method in ["sklearn-brute", "ckdtree"] {
             let out = work.join(format!("idx-{method}-{k}.npy"));
             let r = run(Command::new(&py)
@@ -320,14 +340,14 @@ pub fn bench_refine(args: &Args) -> anyhow::Result<()> {
             agree &= idx.iter().zip(&i_tree).all(|(&p, &o)| p as usize == o);
         }
         println!(
-            "{k:>4} {t_tree:>11.4} {t_brute:>11.4} {t_prefix:>12.4} {t_tiles:>11.4} {t_auto:>11.4} {t_hinted:>13.4} {:>13.4} {:>11.4} {:>8.1}x {:>8.1}x  {}",
+            "{k:>4} {t_tree:>11.4} {t_brute:>11.4} {t_prefix:>12.4} {t_tiles:>11.4} {t_auto:>11.4} {t_hinted:>13.4} {t_balls:>14.4} {:>13.4} {:>11.4} {:>8.1}x {:>8.1}x  {}",
             peer[0],
             peer[1],
             peer[0] / t_auto,
             peer[1] / t_auto,
             if agree { "yes" } else { "NO" }
         );
-        nn_rows.push(json!({"k": k, "fmaps_tree": t_tree, "fmaps_brute": t_brute, "fmaps_prefix": t_prefix, "fmaps_tiles": t_tiles, "fmaps_auto": t_auto, "fmaps_auto_guesses": t_hinted,
+        nn_rows.push(json!({"k": k, "fmaps_tree": t_tree, "fmaps_brute": t_brute, "fmaps_prefix": t_prefix, "fmaps_tiles": t_tiles, "fmaps_auto": t_auto, "fmaps_auto_guesses": t_hinted, "fmaps_balls_guesses": t_balls,
             "sklearn_brute": peer[0], "ckdtree": peer[1], "indices_agree": agree}));
     }
     if args.nn_only {

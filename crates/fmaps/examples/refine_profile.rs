@@ -44,10 +44,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let t = Instant::now();
         let r = refiner.refine(&init.c_ba, &pb.basis, &pa.basis)?;
         println!(
-            "{} {:.3} s (nn {:.3} s)",
+            "{} {:.3} s (nn {:.3} s, map checksum {})",
             refiner.name(),
             t.elapsed().as_secs_f64(),
-            r.report.nn_seconds
+            r.report.nn_seconds,
+            r.t_ba.iter().sum::<usize>()
         );
     }
     Ok(())

@@ -2,7 +2,8 @@
 //! by `cargo xtask bench-refine`, float64 `.npy`), for profiling:
 //! `cargo run --release -p fmaps-nn --example nn_profile --
 //! target/bench/refine/data150.npy target/bench/refine/query150.npy tiles 20
-//! [hint]`.
+//! [hint | GUESSES.npy]` (strategies: brute, tree, prefix, balls, tiles,
+//! auto).
 use std::time::Instant;
 
 use fmaps_nn::{NnParams, NnStrategy, cpu_features, nearest_rows, view};
@@ -42,22 +43,30 @@ fn main() {
         "tree" => NnStrategy::Tree,
         "prefix" => NnStrategy::Prefix,
         "tiles" => NnStrategy::Tiles,
+        "balls" => NnStrategy::Balls,
         _ => NnStrategy::Auto,
     };
     let reps: usize = args.get(4).map_or(10, |s| s.parse().expect("a count"));
-    // `hint` as a fifth argument: the answer itself as guesses (as late in
-    // ZoomOut and ICP).
+    // The balls' clusters (strategy `balls`, or `auto` with guesses and
+    // no tiles), computed once, as ZoomOut does per shape.
+    let partition =
+        fmaps_nn::Partition::kmeans(view(&data), fmaps_nn::BALL_SIZE, fmaps_nn::KMEANS_STEPS);
     let search = |hint: Option<&[usize]>, strategy| {
         nearest_rows(
             view(&data),
             view(&queries),
             hint,
-            &NnParams::with_strategy(strategy),
+            &NnParams::with_strategy(strategy).with_partition(partition.clone()),
         )
         .expect("rows of equal length")
     };
-    let hint =
-        (args.get(5).map(|s| s.as_str()) == Some("hint")).then(|| search(None, NnStrategy::Brute));
+    // `hint` as a fifth argument: the answer itself as guesses (as late in
+    // ZoomOut and ICP); a path to a float64 .npy of indices: those.
+    let hint = match args.get(5).map(|s| s.as_str()) {
+        Some("hint") => Some(search(None, NnStrategy::Brute)),
+        Some(path) => Some(load(path).iter().map(|&v| v as usize).collect()),
+        None => None,
+    };
     let t = Instant::now();
     let mut sum = 0usize;
     for _ in 0..reps {

@@ -18,6 +18,13 @@
 //! that makes this cut sharp. The scans and distance kernels are compiled
 //! for AVX-512 and AVX2 as well and the widest one the CPU has is run.
 //!
+//! Without matrix tiles, where a search is repeated on linear images of
+//! the same rows (ZoomOut's `Φ_A Cᵀ`) with guesses, clusters of the rows
+//! computed once ([`Partition`]) prune nearly everything
+//! ([`NnStrategy::Balls`]): each cluster is bounded by a ball and by a box
+//! along its principal directions, and a query measures only the few rows
+//! those bounds cannot rule out, in f64.
+//!
 //! On CPUs with matrix tiles (Intel AMX; [`NnStrategy::Tiles`], the
 //! default from 16 dimensions where [`tiles_available`]) every pair is
 //! ranked in bf16 in the full dimension at ~6x the f32 GEMM rate, with a
@@ -59,9 +66,11 @@
 //! them [`wedge_sums`] for `fmaps-solve`).
 #![deny(missing_docs)]
 
+mod balls;
 mod brute;
 mod cpu;
 mod knn;
+mod partition;
 mod prefix;
 mod rows;
 mod tiles;
@@ -76,9 +85,12 @@ use nalgebra::DMatrix;
 
 use std::sync::OnceLock;
 
+use balls::BallData;
+pub use balls::{BALL_SIZE, KMEANS_STEPS, Partition};
 use brute::{BruteData, FUSED_MAX_DIM, brute_search, max_abs, power_of_two_scale, scale_for};
 use prefix::{PREFIX_FROM, PREFIX_MAX_ROWS, PrefixData, prefix_search};
 use rows::Rows;
+use std::sync::Arc;
 use tree::{LEAF_DATA, LEAF_QUERY, TREE_MAX_DIM, TreeData, tree_search};
 
 /// Rows of both sets from which [`NnStrategy::Auto`] uses the tree (in
@@ -161,17 +173,35 @@ fn check_finite(m: MatRef<'_, f64>, side: &'static str) -> Result<()> {
 pub type Result<T, E = Error> = std::result::Result<T, E>;
 
 /// Knobs of [`nearest_rows`]; the answer never depends on them.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[derive(Debug, Clone, PartialEq, Eq, Default)]
 #[non_exhaustive]
 pub struct NnParams {
     /// How the search runs ([`NnStrategy::Auto`] by default).
     pub strategy: NnStrategy,
+    /// Clusters of the data rows for [`NnStrategy::Balls`] (ignored when
+    /// it does not label every data row): computed once, e.g. for a
+    /// shape's spectral embedding, and reused for every linear image of it
+    /// that is searched (ZoomOut's `Φ_A Cᵀ`). With a partition,
+    /// [`NnStrategy::Auto`] runs the balls where the CPU has no matrix
+    /// tiles and guesses are given.
+    pub partition: Option<Arc<Partition>>,
 }
 
 impl NnParams {
     /// The default knobs with `strategy`.
     pub fn with_strategy(strategy: NnStrategy) -> Self {
-        NnParams { strategy }
+        NnParams {
+            strategy,
+            partition: None,
+        }
+    }
+
+    /// These knobs with the data rows' clusters `partition`.
+    pub fn with_partition(self, partition: Arc<Partition>) -> Self {
+        NnParams {
+            partition: Some(partition),
+            ..self
+        }
     }
 }
 
@@ -201,6 +231,17 @@ pub enum NnStrategy {
     /// the leading (low-frequency) coordinates, so a few percent of the
     /// rows survive.
     Prefix,
+    /// The data rows in small clusters (a [`Partition`], given in
+    /// [`NnParams::partition`] or computed), each bounded by a ball and by
+    /// a *tangent box* (its spread along a few principal directions, and
+    /// its distance from their span); each query bounds its distance to
+    /// every cluster (two f64 GEMMs per block of queries) and visits,
+    /// nearest bound first, only the clusters, then the rows, that can be
+    /// nearer than its best so far (its guess, when given), with exact f64
+    /// distances. No f32 and no matrix units: on spectral embeddings with
+    /// the previous iteration's map as guesses a query measures ~3 rows
+    /// (FAUST, 5k vertices, k = 100).
+    Balls,
     /// Every pair ranked in the full dimension on the CPU's matrix tiles
     /// (Intel AMX: bf16 products, f32 sums, ~6x the f32 GEMM rate); the
     /// rows within a rigorous bound of the best are re-checked in f64.
@@ -264,7 +305,15 @@ pub fn nearest_rows(
         // Every row is at distance 0: ties go to the smallest index.
         return Ok(vec![0; queries.nrows()]);
     }
-    let mut strategy = resolve(params.strategy, nx, queries.nrows(), d, hint.is_some());
+    let partition = params.partition.as_deref().filter(|p| p.len() == nx);
+    let mut strategy = resolve(
+        params.strategy,
+        nx,
+        queries.nrows(),
+        d,
+        hint.is_some(),
+        partition.is_some(),
+    );
     if strategy == NnStrategy::Tiles {
         if let Some(found) = tiles::search_rows(Rows::of(data), Rows::of(queries), hint) {
             return Ok(found);
@@ -272,7 +321,13 @@ pub fn nearest_rows(
         // No tiles here, or rows out of their range.
         strategy = NnStrategy::Brute;
     }
-    Ok(search(&owned(data), &owned(queries), strategy, hint))
+    Ok(search(
+        &owned(data),
+        &owned(queries),
+        strategy,
+        hint,
+        partition,
+    ))
 }
 
 /// Checks the queries and guesses against `nx` data rows of `d`
@@ -338,6 +393,7 @@ pub struct Searcher {
     brute: OnceLock<BruteData>,
     tree: OnceLock<TreeData>,
     prefix: OnceLock<PrefixData>,
+    balls: OnceLock<BallData>,
 }
 
 impl Searcher {
@@ -351,10 +407,11 @@ impl Searcher {
             scale: scale_for(max),
             max,
             data,
-            params: *params,
+            params: params.clone(),
             brute: OnceLock::new(),
             tree: OnceLock::new(),
             prefix: OnceLock::new(),
+            balls: OnceLock::new(),
         })
     }
 
@@ -380,7 +437,15 @@ impl Searcher {
             return Ok(vec![0; queries.nrows()]);
         }
         let nq = queries.nrows();
-        let mut strategy = resolve(self.params.strategy, nx, nq, d, hint.is_some());
+        let partition = self.params.partition.as_deref().filter(|p| p.len() == nx);
+        let mut strategy = resolve(
+            self.params.strategy,
+            nx,
+            nq,
+            d,
+            hint.is_some(),
+            partition.is_some(),
+        );
         if strategy == NnStrategy::Tiles {
             if let Some(found) =
                 tiles::search_rows(Rows::of(view(&self.data)), Rows::of(queries), hint)
@@ -394,7 +459,7 @@ impl Searcher {
         // another one (far larger or smaller than the data) take the
         // one-off path.
         if scale_for(self.max.max(max_abs(&queries))) != self.scale {
-            return Ok(search(&self.data, &queries, strategy, hint));
+            return Ok(search(&self.data, &queries, strategy, hint, partition));
         }
         let scaled = |m: &DMatrix<f64>| self.scale.map(|s| m * s);
         let q_scaled = scaled(&queries);
@@ -406,6 +471,10 @@ impl Searcher {
                 .prefix
                 .get_or_init(|| PrefixData::new(&data()))
                 .search(q, hint),
+            NnStrategy::Balls => self
+                .balls
+                .get_or_init(|| BallData::new(&data(), partition))
+                .search(q, hint),
             _ => self.brute.get_or_init(|| BruteData::new(&data())).search(q),
         })
     }
@@ -415,15 +484,26 @@ impl Searcher {
 /// queries of `d` coordinates (others stand for themselves). The choice
 /// follows measurements on FAUST spectral embeddings (README, "Choosing a
 /// strategy"): the tiles wherever they exist, the prefix search with
-/// guesses in high dimensions, the tree only for very large sets in 33-48
-/// dimensions (below 33 the fused brute-force kernel is faster at every
-/// size measured, up to 80k x 80k rows).
-fn resolve(strategy: NnStrategy, nx: usize, nq: usize, d: usize, hinted: bool) -> NnStrategy {
+/// guesses in high dimensions, the clusters instead where a partition is
+/// given (more than 32 coordinates: below, the fused kernel), the tree
+/// only for very large sets in 33-48 dimensions (below 33 the fused
+/// brute-force kernel is faster at every size measured, up to 80k x 80k
+/// rows).
+fn resolve(
+    strategy: NnStrategy,
+    nx: usize,
+    nq: usize,
+    d: usize,
+    hinted: bool,
+    partitioned: bool,
+) -> NnStrategy {
     if strategy != NnStrategy::Auto {
         return strategy;
     }
     if d >= TILES_FROM && tiles::available() {
         NnStrategy::Tiles
+    } else if partitioned && hinted && d > FUSED_MAX_DIM {
+        NnStrategy::Balls
     } else if (1024..=PREFIX_MAX_ROWS).contains(&nx) && d >= PREFIX_FROM && hinted {
         NnStrategy::Prefix
     } else if (FUSED_MAX_DIM + 1..=TREE_MAX_DIM).contains(&d)
@@ -467,6 +547,7 @@ fn search(
     queries: &DMatrix<f64>,
     strategy: NnStrategy,
     hint: Option<&[usize]>,
+    partition: Option<&Partition>,
 ) -> Vec<usize> {
     let d = data.ncols();
     // The f32 strategies need coordinates well inside f32's range: far
@@ -481,6 +562,7 @@ fn search(
     match strategy {
         NnStrategy::Tree if d > 0 => return tree_search(data, queries),
         NnStrategy::Prefix if d >= 2 * PREFIX_MIN => return prefix_search(data, queries, hint),
+        NnStrategy::Balls => return BallData::new(data, partition).search(queries, hint),
         _ => {}
     }
     brute_search(data, queries)

@@ -56,7 +56,7 @@ proptest! {
             _ => offset + scale * (rnd() - 0.5),
         });
         let want = naive_nearest(&x, &q);
-        for strategy in [NnStrategy::Auto, NnStrategy::Brute, NnStrategy::Tree, NnStrategy::Prefix, NnStrategy::Tiles] {
+        for strategy in [NnStrategy::Auto, NnStrategy::Brute, NnStrategy::Tree, NnStrategy::Prefix, NnStrategy::Balls, NnStrategy::Tiles] {
             prop_assert_eq!(&nearest_rows_with(&x, &q, strategy), &want, "{:?}", strategy);
         }
         let guesses: Vec<usize> = (0..nq).map(|i| match i % 4 {
@@ -65,7 +65,7 @@ proptest! {
             2 => nx + i,
             _ => (i * 13) % nx,
         }).collect();
-        for strategy in [NnStrategy::Auto, NnStrategy::Prefix, NnStrategy::Tiles] {
+        for strategy in [NnStrategy::Auto, NnStrategy::Prefix, NnStrategy::Balls, NnStrategy::Tiles] {
             prop_assert_eq!(&nearest_rows_hinted_with(&x, &q, &guesses, strategy), &want, "{:?} with guesses", strategy);
         }
         // Views: column-major, row-major, and the leading columns of a
@@ -84,7 +84,7 @@ proptest! {
         let xv = MatRef::from_row_major_slice_with_stride(&xw, nx, d, wx);
         let qv = MatRef::from_row_major_slice_with_stride(&qw, nq, d, wq);
         let xc = MatRef::from_column_major_slice(x.as_slice(), nx, d);
-        for strategy in [NnStrategy::Auto, NnStrategy::Brute, NnStrategy::Tiles] {
+        for strategy in [NnStrategy::Auto, NnStrategy::Brute, NnStrategy::Balls, NnStrategy::Tiles] {
             prop_assert_eq!(&nearest_rows(xv, qv, None, &NnParams::with_strategy(strategy)).unwrap(), &want, "{:?} on row views", strategy);
             prop_assert_eq!(&nearest_rows(xc, qv, Some(&guesses), &NnParams::with_strategy(strategy)).unwrap(), &want, "{:?} on mixed views", strategy);
         }

@@ -39,6 +39,7 @@ fn nearest_rows_matches_a_naive_search() {
             NnStrategy::Brute,
             NnStrategy::Tree,
             NnStrategy::Prefix,
+            NnStrategy::Balls,
             NnStrategy::Tiles,
         ] {
             let got = nearest_rows_with(&x, &q, strategy);
@@ -134,6 +135,76 @@ fn prefix_search_equals_brute_force_whatever_the_guesses() {
         // Every row is its own nearest (no two vertices share an embedding).
         let own = nearest_rows_with(&x, &x, NnStrategy::Prefix);
         assert!(own.iter().enumerate().all(|(i, &j)| i == j), "k = {k}");
+    }
+}
+
+/// The ball search on spectral embeddings, as ZoomOut runs it: the
+/// clusters computed once on the embedding and reused for linear images
+/// of it (`Φ Cᵀ` for near-isometric and rough maps `C`), and clusters
+/// that fit the rows badly (stripes of every 7th row, one cluster of
+/// everything, singletons): equal to brute force for every query, with no
+/// guess, exact, shifted and out-of-range guesses.
+#[test]
+fn ball_search_equals_brute_force_with_any_partition() {
+    use fmaps_nn::{BALL_SIZE, KMEANS_STEPS, NnParams, Partition, view};
+    let b = grid_basis(48, 24, 80);
+    let n = b.n();
+    let own = Partition::kmeans(
+        view(&b.eigenvectors.columns(0, 80).into_owned()),
+        BALL_SIZE,
+        KMEANS_STEPS,
+    );
+    let partitions = [
+        own,
+        Partition::from_labels((0..n as u32).map(|i| i % 7).collect()),
+        Partition::from_labels(vec![0; n]),
+        Partition::from_labels((0..n as u32).collect()),
+    ];
+    for k in [3, 12, 40, 80] {
+        let phi = b.eigenvectors.columns(0, k).into_owned();
+        // A near-identity map with sign flips and mixing, and a rough one.
+        for (m, c) in [(0, 0.05), (1, 0.6)] {
+            let cmat = DMatrix::from_fn(k, k, |i, j| {
+                let sign = if (i + m) % 3 == 0 { -1.0 } else { 1.0 };
+                (if i == j { sign } else { 0.0 })
+                    + c * (((i * 7 + j * 3 + m) as f64).sin()) / k as f64
+            });
+            let x = &phi * cmat.transpose();
+            let mut q = DMatrix::from_fn(n, k, |i, j| {
+                phi[(i, j)] * (1.0 + 0.2 * ((i * 13 + j * 7) as f64).sin())
+            });
+            for i in 0..10 {
+                q.row_mut(i).iter_mut().for_each(|v| *v = 3.0 + i as f64);
+            }
+            let brute = nearest_rows_with(&x, &q, NnStrategy::Brute);
+            let shifted: Vec<usize> = brute.iter().map(|&t| (t + 17) % n).collect();
+            let wild: Vec<usize> = (0..n)
+                .map(|i| if i % 3 == 0 { n + i } else { (i * 31) % n })
+                .collect();
+            for (pi, p) in partitions.iter().enumerate() {
+                let params = NnParams::with_strategy(NnStrategy::Balls).with_partition(p.clone());
+                let run = |hint: Option<&[usize]>| {
+                    fmaps_nn::nearest_rows(view(&x), view(&q), hint, &params).unwrap()
+                };
+                assert_eq!(run(None), brute, "k = {k}, map {m}, partition {pi}");
+                for hint in [&brute, &shifted, &wild] {
+                    assert_eq!(
+                        run(Some(hint)),
+                        brute,
+                        "k = {k}, map {m}, partition {pi}, guesses"
+                    );
+                }
+                // Auto takes the clusters with guesses and > 32 coordinates.
+                let auto = fmaps_nn::nearest_rows(
+                    view(&x),
+                    view(&q),
+                    Some(&shifted),
+                    &NnParams::default().with_partition(p.clone()),
+                )
+                .unwrap();
+                assert_eq!(auto, brute, "k = {k}, map {m}, partition {pi}, auto");
+            }
+        }
     }
 }
 

@@ -61,7 +61,12 @@ fn every_simd_level_gives_the_naive_answer() {
         assert_eq!(simd_level(), level);
         for ((x, q), want) in random.iter().chain(&spectral).zip(&want) {
             let d = x.ncols();
-            for strategy in [NnStrategy::Brute, NnStrategy::Tree, NnStrategy::Prefix] {
+            for strategy in [
+                NnStrategy::Brute,
+                NnStrategy::Tree,
+                NnStrategy::Prefix,
+                NnStrategy::Balls,
+            ] {
                 let got = nearest_rows_with(x, q, strategy);
                 assert_eq!(&got, want, "{level:?} {strategy:?} d = {d}");
             }
@@ -69,6 +74,8 @@ fn every_simd_level_gives_the_naive_answer() {
             for hint in [want, &shifted] {
                 let got = nearest_rows_hinted_with(x, q, hint, NnStrategy::Prefix);
                 assert_eq!(&got, want, "{level:?} prefix with guesses, d = {d}");
+                let got = nearest_rows_hinted_with(x, q, hint, NnStrategy::Balls);
+                assert_eq!(&got, want, "{level:?} balls with guesses, d = {d}");
             }
             let knn = k_nearest_rows(view(x), view(q), 3).unwrap();
             let first: Vec<usize> = knn.index.chunks(knn.k).map(|r| r[0]).collect();

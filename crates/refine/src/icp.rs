@@ -78,11 +78,21 @@ impl Refiner for Icp {
         // whose early maps are noisy (docs/tuning.md; the tree is better up
         // to 48 dimensions).
         let dim = if self.adjoint { ka } else { kb };
-        let nn_params = NnParams::with_strategy(if dim > 48 && !fmaps_nn::tiles_available() {
-            NnStrategy::Prefix
+        // Without tiles, in more than 32 dimensions: the clusters of A's
+        // rows (the data of every search) and the ball search.
+        let partition = if dim > 32 && self.sinkhorn.is_none() {
+            crate::zoomout::balls_partition(phi_a)
         } else {
-            NnStrategy::Auto
-        });
+            None
+        };
+        let nn_params = match partition {
+            Some(p) => NnParams::with_strategy(NnStrategy::Balls).with_partition(p),
+            None => NnParams::with_strategy(if dim > 48 && !fmaps_nn::tiles_available() {
+                NnStrategy::Prefix
+            } else {
+                NnStrategy::Auto
+            }),
+        };
         let conversion = if self.adjoint {
             Conversion::Adjoint
         } else {

@@ -252,13 +252,32 @@ impl Refiner for ZoomOut {
         } else {
             Conversion::Direct
         };
-        let nn_params = NnParams::default();
+        // Without matrix tiles, each shape's rows are clustered once (at
+        // the final size) and every search bounds the clusters' images by
+        // balls (`NnStrategy::Balls`, exact): the data searched, `Φ_A Cᵀ`
+        // or `Φ_A`, is a linear image of the same rows at every size.
+        let t_part = Instant::now();
+        let partitions = balls_partitions(&self.sinkhorn, &side_a.phi, &side_b.phi, self.bijective);
+        let nn_params_a = partitions
+            .0
+            .map_or_else(NnParams::default, |p| NnParams::default().with_partition(p));
+        let nn_params_b = partitions
+            .1
+            .map_or_else(NnParams::default, |p| NnParams::default().with_partition(p));
+        let partition_seconds = t_part.elapsed().as_secs_f64();
+        report.nn_seconds += partition_seconds;
         let mut nn =
             |c: &DMatrix<f64>, data: &BasisRows, queries: &BasisRows, hint: Option<&[usize]>| {
                 let t = Instant::now();
+                // The data side's clusters (ignored where the rows differ).
+                let nn_params = if std::ptr::eq(data, &side_b.phi) {
+                    &nn_params_b
+                } else {
+                    &nn_params_a
+                };
                 let map = match &self.sinkhorn {
                     Some(p) => point_map_sinkhorn(c, data, queries, conversion, p)?.0,
-                    None => point_map(c, data, queries, conversion, hint, &nn_params)?,
+                    None => point_map(c, data, queries, conversion, hint, nn_params)?,
                 };
                 report.nn_searches += 1;
                 report.nn_seconds += t.elapsed().as_secs_f64();
@@ -307,4 +326,49 @@ impl Refiner for ZoomOut {
             report,
         })
     }
+}
+
+/// k-means clusters of A's rows (and B's when the refinement also searches
+/// among B's rows) for the ball search ([`balls_partition`]).
+fn balls_partitions(
+    sinkhorn: &Option<Sinkhorn>,
+    a: &BasisRows,
+    b: &BasisRows,
+    bijective: bool,
+) -> (
+    Option<std::sync::Arc<fmaps_nn::Partition>>,
+    Option<std::sync::Arc<fmaps_nn::Partition>>,
+) {
+    if sinkhorn.is_some() {
+        return (None, None);
+    }
+    if bijective {
+        rayon::join(|| balls_partition(a), || balls_partition(b))
+    } else {
+        (balls_partition(a), None)
+    }
+}
+
+/// Rows from which the balls pay (below, brute force is as fast).
+const BALLS_MIN_ROWS: usize = 1024;
+/// Rows up to which the clusters are computed: k-means costs n²k/24 per
+/// Lloyd step (at 80k rows, k = 200, minutes); larger sets (ZoomOut's
+/// full-size final map after sampled iterations) search without.
+const BALLS_MAX_ROWS: usize = 20_000;
+
+/// k-means clusters of the rows `r` (one per ~24 rows) for the ball search
+/// (`NnStrategy::Balls`: exact, and where there are no matrix tiles the
+/// fastest search of a linear image of these rows with guesses), when it
+/// pays: no tiles, 1024-20,000 rows. `FMAPS_NO_BALLS=1` turns it off (to
+/// compare; the maps are the same).
+pub(crate) fn balls_partition(r: &BasisRows) -> Option<std::sync::Arc<fmaps_nn::Partition>> {
+    let off = std::env::var_os("FMAPS_NO_BALLS").is_some_and(|v| !v.is_empty() && v != "0");
+    if off || fmaps_nn::tiles_available() || !(BALLS_MIN_ROWS..=BALLS_MAX_ROWS).contains(&r.n()) {
+        return None;
+    }
+    Some(fmaps_nn::Partition::kmeans(
+        r.view(r.k()),
+        fmaps_nn::BALL_SIZE,
+        fmaps_nn::KMEANS_STEPS,
+    ))
 }

@@ -1,0 +1,97 @@
+//! Tests of the ball search's bounds (internal: they read its clusters).
+use super::*;
+
+/// Cluster `j`'s bound for the query `qi`, from direct dot products (the
+/// search takes them from GEMMs).
+fn bound(b: &BallData, j: usize, qi: &[f64]) -> Tangent {
+    let d = b.d;
+    let dot = |v: &[f64]| -> f64 { qi.iter().zip(v).map(|(a, b)| a * b).sum() };
+    let qn = dot(qi);
+    let qc = dot(&b.centers[j * d..(j + 1) * d]);
+    let uq: Vec<f64> = (0..TANGENT)
+        .map(|t| dot(&b.tangent[(j * TANGENT + t) * d..(j * TANGENT + t + 1) * d]))
+        .collect();
+    tangent_bound(b, j, qn, qc, &uq, slack(d))
+}
+
+/// Every bound the search uses is below the distance it bounds: per
+/// (query, cluster) the cluster's bound (from the GEMMs' quantities,
+/// as the search computes them) against every row of the cluster, and
+/// each row's own bound against its distance, on points near a curved
+/// 2-manifold in R^d (as spectral embeddings are), queries near and
+/// far, in dimensions below and above the number of directions.
+#[test]
+fn bounds_are_below_the_distances() {
+    for d in [1, 3, 5, 40, 97] {
+        let n = 600;
+        let x = DMatrix::from_fn(n, d, |i, j| {
+            let (u, v) = ((i % 30) as f64 / 30.0, (i / 30) as f64 / 20.0);
+            let f = 1.0 + j as f64;
+            (f * u * 3.1 + j as f64 * 0.7).sin() * (f * v * 2.3).cos() / f.sqrt()
+        });
+        let q = DMatrix::from_fn(200, d, |i, j| {
+            let base = x[((i * 7) % n, j)];
+            if i % 10 == 0 {
+                3.0 + base
+            } else {
+                base + 0.05 * ((i * 13 + j * 5) as f64).sin()
+            }
+        });
+        let b = BallData::new(&x, None);
+        let sl = slack(d);
+        let qr = row_major(&q, None);
+        let mut checked = 0usize;
+        for qi in qr.chunks_exact(d) {
+            for (j, &(start, len)) in b.ranges.iter().enumerate() {
+                let tb = bound(&b, j, qi);
+                let tol = tb.eps + sl * b.radii[j];
+                for p in start..start + len {
+                    let dist = dist2(&b.x_ord[p * d..(p + 1) * d], qi);
+                    assert!(tb.lb2 <= dist, "d {d} cluster {j}: {} > {dist}", tb.lb2);
+                    let mut gap2 = 0.0;
+                    for t in 0..TANGENT {
+                        let g = ((tb.t[t] - b.row_tan[t * n + p]).abs() - tol).max(0.0);
+                        gap2 += g * g;
+                    }
+                    let pb = (tb.perp - b.row_perp[p]).max(0.0);
+                    let row = (gap2 * (1.0 - b.eta) + pb * pb) * (1.0 - 2.0 * sl);
+                    assert!(row <= dist, "d {d} row {p}: {row} > {dist}");
+                    checked += 1;
+                }
+            }
+        }
+        assert_eq!(checked, 200 * n);
+        // The directions are orthonormal to rounding.
+        assert!(b.eta < 1e-12, "eta {}", b.eta);
+    }
+}
+
+/// The tangent bound prunes: on the same manifold, a query near it
+/// rules out most clusters the ball bound alone keeps.
+#[test]
+fn tangent_bound_is_tighter_than_the_ball() {
+    let (n, d) = (2400, 60);
+    let x = DMatrix::from_fn(n, d, |i, j| {
+        let (u, v) = ((i % 60) as f64 / 60.0, (i / 60) as f64 / 40.0);
+        let f = 1.0 + j as f64;
+        (f * u * 3.1 + j as f64 * 0.7).sin() * (f * v * 2.3).cos() / f.sqrt()
+    });
+    let b = BallData::new(&x, None);
+    let (mut ball, mut tangent) = (0usize, 0usize);
+    for i in (0..n).step_by(37) {
+        // A query off the sheet by a fraction of the spacing.
+        let qi: Vec<f64> = (0..d)
+            .map(|j| x[(i, j)] + 0.02 * ((i + 3 * j) as f64).cos())
+            .collect();
+        let best = (0..n)
+            .map(|p| dist2(&b.x_ord[p * d..(p + 1) * d], &qi))
+            .fold(f64::INFINITY, f64::min);
+        for j in 0..b.ranges.len() {
+            let tb = bound(&b, j, &qi);
+            let plain = (tb.dc_lo - b.radii[j]).max(0.0);
+            ball += usize::from(plain * plain <= best);
+            tangent += usize::from(tb.lb2 <= best);
+        }
+    }
+    assert!(tangent * 2 < ball, "tangent {tangent}, ball {ball}");
+}
