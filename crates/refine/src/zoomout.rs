@@ -313,7 +313,20 @@ impl Refiner for ZoomOut {
                 || BasisRows::new(basis_a, kf),
                 || BasisRows::new(basis_b, kf),
             );
-            nn(&c, &all_a, &all_b, None)?
+            // The clusters of all of A's rows, for the one full-size
+            // search (no guesses: the iterations ran on samples).
+            match balls_partition(&all_a).filter(|_| self.sinkhorn.is_none()) {
+                Some(p) => {
+                    let t = Instant::now();
+                    let params =
+                        NnParams::with_strategy(fmaps_nn::NnStrategy::Balls).with_partition(p);
+                    let map = point_map(&c, &all_a, &all_b, conversion, None, &params)?;
+                    report.nn_searches += 1;
+                    report.nn_seconds += t.elapsed().as_secs_f64();
+                    map
+                }
+                None => nn(&c, &all_a, &all_b, None)?,
+            }
         } else {
             nn(&c, &side_a.phi, &side_b.phi, prev.as_deref())?
         };
@@ -351,15 +364,14 @@ fn balls_partitions(
 
 /// Rows from which the balls pay (below, brute force is as fast).
 const BALLS_MIN_ROWS: usize = 1024;
-/// Rows up to which the clusters are computed: k-means costs n²k/24 per
-/// Lloyd step (at 80k rows, k = 200, minutes); larger sets (ZoomOut's
-/// full-size final map after sampled iterations) search without.
-const BALLS_MAX_ROWS: usize = 20_000;
+/// Rows up to which the clusters are computed (k-means with local Lloyd
+/// steps above 512 clusters: ~n·24·k per step).
+const BALLS_MAX_ROWS: usize = 250_000;
 
 /// k-means clusters of the rows `r` (one per ~24 rows) for the ball search
 /// (`NnStrategy::Balls`: exact, and where there are no matrix tiles the
 /// fastest search of a linear image of these rows with guesses), when it
-/// pays: no tiles, 1024-20,000 rows. `FMAPS_NO_BALLS=1` turns it off (to
+/// pays: no tiles, 1024-250,000 rows. `FMAPS_NO_BALLS=1` turns it off (to
 /// compare; the maps are the same).
 pub(crate) fn balls_partition(r: &BasisRows) -> Option<std::sync::Arc<fmaps_nn::Partition>> {
     let off = std::env::var_os("FMAPS_NO_BALLS").is_some_and(|v| !v.is_empty() && v != "0");
