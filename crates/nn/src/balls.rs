@@ -318,29 +318,27 @@ impl BallData {
         let nq = queries.nrows();
         // Queries grouped by their guess's ball: a block of queries then
         // visits mostly the same balls, which stay in cache.
-        let mut qorder: Vec<usize> = (0..nq).collect();
         let nx = self.order.len();
-        let guess = |q: usize| hint.map_or(usize::MAX, |h| h[q]);
+        // The cluster of each query's guess (u32::MAX: no guess).
+        let cluster = |q: usize| match hint.map(|h| h[q]) {
+            Some(g) if g < nx => self.ball_of[g],
+            _ => u32::MAX,
+        };
+        let mut qorder: Vec<usize> = (0..nq).collect();
         if hint.is_some() {
-            qorder.sort_by_key(|&q| {
-                let g = guess(q);
-                (if g < nx { self.ball_of[g] } else { u32::MAX }, q)
-            });
+            qorder.sort_by_key(|&q| (cluster(q), q));
         }
         let q_rows = row_major(queries, Some(&qorder));
-        let hints: Option<Vec<usize>> = hint.map(|_| qorder.iter().map(|&q| guess(q)).collect());
+        let hints: Option<Vec<usize>> = hint.map(|h| qorder.iter().map(|&q| h[q]).collect());
+        let keys: Vec<u32> = qorder.iter().map(|&q| cluster(q)).collect();
         // Blocks: the queries whose guesses share a ball (they search the
         // same neighbourhood), at most QUERY_BLOCK, runs shorter than
         // MIN_BLOCK merged with the next.
-        let key = |t: usize| {
-            let g = hints.as_ref().map_or(usize::MAX, |h| h[t]);
-            if g < nx { self.ball_of[g] } else { u32::MAX }
-        };
         let mut blocks: Vec<(usize, usize)> = Vec::new();
         let mut q0 = 0;
         for t in 1..=nq {
             let len = t - q0;
-            if t == nq || len == QUERY_BLOCK || (len >= MIN_BLOCK && key(t) != key(t - 1)) {
+            if t == nq || len == QUERY_BLOCK || (len >= MIN_BLOCK && keys[t] != keys[t - 1]) {
                 blocks.push((q0, len));
                 q0 = t;
             }

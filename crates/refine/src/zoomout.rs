@@ -315,7 +315,12 @@ impl Refiner for ZoomOut {
             );
             // The clusters of all of A's rows, for the one full-size
             // search (no guesses: the iterations ran on samples).
-            match balls_partition(&all_a).filter(|_| self.sinkhorn.is_none()) {
+            let partition = if self.sinkhorn.is_none() {
+                balls_partition(&all_a)
+            } else {
+                None
+            };
+            match partition {
                 Some(p) => {
                     let t = Instant::now();
                     let params =
