@@ -43,7 +43,7 @@ use nalgebra::DMatrix;
 use rayon::prelude::*;
 
 pub use crate::partition::Partition;
-use crate::rows::{dist2, dist2_below, row_major};
+use crate::rows::{Rows, dist2, dist2_below};
 
 /// Rows per ball (about; k-means balls vary in size): the default size of
 /// a [`Partition`].
@@ -174,17 +174,32 @@ impl BallData {
     /// linear map: ZoomOut's `Φ_A Cᵀ`), else a k-means partition of the
     /// data itself.
     pub(crate) fn new(data: &DMatrix<f64>, partition: Option<&Partition>) -> BallData {
+        let rows = Rows::of(MatRef::from_column_major_slice(
+            data.as_slice(),
+            data.nrows(),
+            data.ncols(),
+        ));
+        BallData::from_rows(&rows, partition, None)
+    }
+
+    /// [`BallData::new`] of the rows `data`, each multiplied by `scale`
+    /// when given (a power of two, exact: see `power_of_two_scale`).
+    pub(crate) fn from_rows(
+        data: &Rows<'_>,
+        partition: Option<&Partition>,
+        scale: Option<f64>,
+    ) -> BallData {
         let (nx, d) = data.shape();
         let own;
         let partition = match partition.filter(|p| p.len() == nx) {
             Some(p) => p,
             None => {
-                own = Partition::of_rows(&row_major(data, None), d, BALL_SIZE, KMEANS_STEPS);
+                own = Partition::of_rows(&data.gather(None, scale), d, BALL_SIZE, KMEANS_STEPS);
                 &own
             }
         };
         let (order, ranges) = partition.groups();
-        let x_ord = row_major(data, Some(&order));
+        let x_ord = data.gather(Some(&order), scale);
         let mut pos_of = vec![0u32; nx];
         for (p, &i) in order.iter().enumerate() {
             pos_of[i] = p as u32;
@@ -315,7 +330,23 @@ impl BallData {
     /// The nearest data row of every query (same width as the data);
     /// `hint`: one guess per query (out-of-range entries: no guess).
     pub(crate) fn search(&self, queries: &DMatrix<f64>, hint: Option<&[usize]>) -> Vec<usize> {
-        let nq = queries.nrows();
+        let rows = Rows::of(MatRef::from_column_major_slice(
+            queries.as_slice(),
+            queries.nrows(),
+            queries.ncols(),
+        ));
+        self.search_rows(&rows, hint, None)
+    }
+
+    /// [`BallData::search`] of the rows `queries`, each multiplied by
+    /// `scale` when given (the data's scale).
+    pub(crate) fn search_rows(
+        &self,
+        queries: &Rows<'_>,
+        hint: Option<&[usize]>,
+        scale: Option<f64>,
+    ) -> Vec<usize> {
+        let nq = queries.shape().0;
         // Queries grouped by their guess's ball: a block of queries then
         // visits mostly the same balls, which stay in cache.
         let nx = self.order.len();
@@ -328,7 +359,7 @@ impl BallData {
         if hint.is_some() {
             qorder.sort_by_key(|&q| (cluster(q), q));
         }
-        let q_rows = row_major(queries, Some(&qorder));
+        let q_rows = queries.gather(Some(&qorder), scale);
         let hints: Option<Vec<usize>> = hint.map(|h| qorder.iter().map(|&q| h[q]).collect());
         let keys: Vec<u32> = qorder.iter().map(|&q| cluster(q)).collect();
         // Blocks: the queries whose guesses share a ball (they search the
@@ -365,7 +396,9 @@ impl BallData {
                     let last = blocks[range.end - 1];
                     let slen = last.0 + last.1 - s0;
                     let mut g = std::mem::take(&mut work.g);
-                    g.resize(m * slen, 0.0);
+                    if g.len() < m * slen {
+                        g.resize(m * slen, 0.0);
+                    }
                     // Centre dot products, one contiguous column per query.
                     matmul(
                         faer::MatMut::from_column_major_slice_mut(&mut g[..m * slen], m, slen),

@@ -1,5 +1,6 @@
 //! Tests of the ball search's bounds (internal: they read its clusters).
 use super::*;
+use crate::rows::row_major;
 
 /// Cluster `j`'s bound for the query `qi`, from direct dot products (the
 /// search takes them from GEMMs).

@@ -149,6 +149,27 @@ pub enum Error {
 /// column whose sum is not finite (or overflowed) is scanned entry by
 /// entry.
 fn check_finite(m: MatRef<'_, f64>, side: &'static str) -> Result<()> {
+    if m.col_stride() == 1 && m.ncols() > 1 {
+        // Row-major: row by row.
+        for i in 0..m.nrows() {
+            let row = m.row(i);
+            let sum: f64 = match row.try_as_row_major() {
+                Some(r) => r.as_slice().iter().sum(),
+                None => (0..m.ncols()).map(|j| row[j]).sum(),
+            };
+            if !sum.is_finite()
+                && let Some(j) = (0..m.ncols()).find(|&j| !row[j].is_finite())
+            {
+                return Err(Error::NonFinite {
+                    side,
+                    row: i,
+                    col: j,
+                    value: row[j],
+                });
+            }
+        }
+        return Ok(());
+    }
     for j in 0..m.ncols() {
         let col = m.col(j);
         let sum: f64 = match col.try_as_col_major() {
@@ -320,6 +341,14 @@ pub fn nearest_rows(
         }
         // No tiles here, or rows out of their range.
         strategy = NnStrategy::Brute;
+    }
+    if strategy == NnStrategy::Balls {
+        // Row by row from the views (no column-major copies): the data in
+        // its clusters' order, the queries in their guesses' order.
+        let (x, q) = (Rows::of(data), Rows::of(queries));
+        // (Both checked finite above.)
+        let scale = scale_for(x.max_abs().max(q.max_abs()));
+        return Ok(BallData::from_rows(&x, partition, scale).search_rows(&q, hint, scale));
     }
     Ok(search(
         &owned(data),

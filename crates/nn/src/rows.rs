@@ -7,7 +7,6 @@ use rayon::prelude::*;
 
 /// The rows of a matrix, each contiguous: read in place from a view whose
 /// column stride is 1, else copied row-major (in parallel).
-#[cfg_attr(not(target_arch = "x86_64"), allow(dead_code))] // read by the tiles only
 pub(crate) struct Rows<'a> {
     ptr: *const f64,
     stride: usize,
@@ -55,12 +54,46 @@ impl<'a> Rows<'a> {
 
     /// Row `i`.
     #[inline(always)]
-    #[cfg_attr(not(target_arch = "x86_64"), allow(dead_code))] // the tiles' reader
     pub(crate) fn row(&self, i: usize) -> &[f64] {
         assert!(i < self.n, "row {i} of {}", self.n);
         // SAFETY: row i's d elements are elements of the view (column
         // stride 1) or of the copy, both alive for 'a / self.
         unsafe { std::slice::from_raw_parts(self.ptr.add(i * self.stride), self.d) }
+    }
+}
+
+impl Rows<'_> {
+    /// The rows `order` (all, in order, when `None`), row-major, each
+    /// multiplied by `scale` when given (a power of two: exact).
+    pub(crate) fn gather(&self, order: Option<&[usize]>, scale: Option<f64>) -> Vec<f64> {
+        let n = order.map_or(self.n, <[usize]>::len);
+        let mut out = Vec::with_capacity(n * self.d);
+        for p in 0..n {
+            let src = self.row(order.map_or(p, |o| o[p]));
+            match scale {
+                Some(s) => out.extend(src.iter().map(|v| v * s)),
+                None => out.extend_from_slice(src),
+            }
+        }
+        out
+    }
+
+    /// The largest magnitude of the rows (0 when none), all finite.
+    pub(crate) fn max_abs(&self) -> f64 {
+        let mut lanes = [0.0f64; 8];
+        for i in 0..self.n {
+            let r = self.row(i);
+            let mut chunks = r.chunks_exact(8);
+            for c in &mut chunks {
+                for (l, v) in lanes.iter_mut().zip(c) {
+                    *l = l.max(v.abs());
+                }
+            }
+            for (l, v) in lanes.iter_mut().zip(chunks.remainder()) {
+                *l = l.max(v.abs());
+            }
+        }
+        lanes.into_iter().fold(0.0, f64::max)
     }
 }
 

@@ -204,6 +204,24 @@ fn ball_search_equals_brute_force_with_any_partition() {
                 .unwrap();
                 assert_eq!(auto, brute, "k = {k}, map {m}, partition {pi}, auto");
             }
+            // Row-major views (read in place), and magnitudes far outside
+            // f32's comfort range (the search works on exactly rescaled
+            // copies).
+            for scale in [1.0, 1e-200, 1e200] {
+                let (xs, qs) = (&x * scale, &q * scale);
+                let want = nearest_rows_with(&xs, &qs, NnStrategy::Brute);
+                let (xt, qt) = (xs.transpose(), qs.transpose());
+                let params = NnParams::with_strategy(NnStrategy::Balls)
+                    .with_partition(partitions[0].clone());
+                let found = fmaps_nn::nearest_rows(
+                    faer::MatRef::from_row_major_slice(xt.as_slice(), n, k),
+                    faer::MatRef::from_row_major_slice(qt.as_slice(), n, k),
+                    Some(&shifted),
+                    &params,
+                )
+                .unwrap();
+                assert_eq!(found, want, "k = {k}, map {m}, row-major, x{scale:e}");
+            }
         }
     }
 }
@@ -358,6 +376,7 @@ fn a_searcher_answers_every_query_set_like_the_one_off_search() {
 /// Bad input is an error naming the row, never an out-of-range index.
 #[test]
 fn bad_input_is_an_error() {
+    use faer::MatRef;
     use fmaps_nn::{Error, NnParams, Searcher, nearest_rows, view};
     let p = NnParams::default();
     let x = DMatrix::from_fn(40, 6, |i, j| (i * 3 + j) as f64);
@@ -387,6 +406,22 @@ fn bad_input_is_an_error() {
     q[(7, 4)] = f64::NAN;
     assert!(matches!(
         nearest_rows(view(&x), view(&q), None, &p),
+        Err(Error::NonFinite {
+            side: "query",
+            row: 7,
+            col: 4,
+            ..
+        })
+    ));
+    // The same through a row-major view (checked row by row).
+    let qt = q.transpose();
+    assert!(matches!(
+        nearest_rows(
+            view(&x),
+            MatRef::from_row_major_slice(qt.as_slice(), 10, 6),
+            None,
+            &p
+        ),
         Err(Error::NonFinite {
             side: "query",
             row: 7,
