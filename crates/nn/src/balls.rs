@@ -21,10 +21,10 @@
 //! k = 100, the previous ZoomOut iteration's map as guesses).
 //!
 //! A search: the queries sorted by their guesses' clusters and cut into
-//! blocks; per ~512 queries one f64 GEMM against the centres gives every
+//! blocks; per ~512 queries one f32 GEMM against the centres gives every
 //! (query, cluster) ball bound, with the guess's exact distance as upper
 //! bound (without a guess: the nearest cluster's farthest possible row);
-//! per block one GEMM of the queries against the directions of the
+//! per block one f32 GEMM of the queries against the directions of the
 //! clusters that pass gives the tangent bounds; each query visits its
 //! surviving clusters nearest bound first, skips rows by their own bound,
 //! and measures the rest exactly in f64.
@@ -33,7 +33,10 @@
 //! distance, computed from quantities moved the safe way by a relative
 //! slack far above their f64 rounding (`(d + 2)·2⁻⁵³` relative to the
 //! norms involved; the directions' departure from orthonormality `η` is
-//! measured and folded in), and a cluster or row is skipped only when its
+//! measured and folded in) and, for the GEMMs' f32 products, by their
+//! rounding bound (`(d + 2)·2⁻²⁴` relative, plus f32 underflow: the
+//! brute-force search's `score_err`; the rows are rescaled by a power of
+//! two into f32's range first), and a cluster or row is skipped only when its
 //! bound is *strictly* above the best distance so far, so the answer is
 //! the same f64 argmin (ties: the smallest index) as every strategy.
 
@@ -42,6 +45,7 @@ use faer::{Accum, Mat, MatRef, Par};
 use nalgebra::DMatrix;
 use rayon::prelude::*;
 
+use crate::brute::score_err;
 pub use crate::partition::Partition;
 use crate::rows::{Rows, dist2, dist2_below};
 
@@ -70,20 +74,17 @@ pub(crate) struct BallData {
     pos_of: Vec<u32>,
     /// (start, len) of each ball in ball order.
     ranges: Vec<(usize, usize)>,
-    /// Ball centres, row-major (m x d), their squared norms and radii
+    /// The squared norms of the ball centres (means) and the balls' radii
     /// (rounded up).
-    centers: Vec<f64>,
     c_norm: Vec<f64>,
     radii: Vec<f64>,
     /// Each row's distance to its ball's centre (ball order).
     to_center: Vec<f64>,
     /// The ball of each row (original order).
     ball_of: Vec<u32>,
-    /// Per ball, [`TANGENT`] orthonormal directions (row-major, `TANGENT x
-    /// d`; unused ones zero) spanning most of its rows' spread, the box
-    /// `[lo, hi]` of the rows' coordinates along them (rounded outwards),
-    /// and a bound on the rows' distance to that affine subspace.
-    tangent: Vec<f64>,
+    /// Per ball, the box `[lo, hi]` of the rows' coordinates along its
+    /// directions (rounded outwards), and a bound on the rows' distance
+    /// to their affine span.
     box_lo: Vec<f64>,
     box_hi: Vec<f64>,
     r_perp: Vec<f64>,
@@ -94,6 +95,14 @@ pub(crate) struct BallData {
     row_perp: Vec<f64>,
     /// Per ball, its directions' dot products with its centre.
     uc: Vec<f64>,
+    /// The ball centres (row-major, m x d), and per ball [`TANGENT`]
+    /// orthonormal directions (row-major, `TANGENT x d`; unused ones zero)
+    /// spanning most of its rows' spread, in f32: the GEMMs' operands,
+    /// whose products carry the error bound [`score_err`]; each centre's
+    /// share of that bound.
+    centers32: Vec<f32>,
+    tangent32: Vec<f32>,
+    c_err: Vec<f64>,
     /// A bound on `‖UUᵀ − I‖` over every ball's directions `U`.
     eta: f64,
 }
@@ -301,28 +310,32 @@ impl BallData {
                 ball_of[i] = b as u32;
             }
         }
-        let c_norm = centers
+        let c_norm: Vec<f64> = centers
             .chunks_exact(d)
             .map(|c| c.iter().map(|v| v * v).sum())
             .collect();
+        let c_err = c_norm.iter().map(|&cn| cross_err(d, 0.0, cn)).collect();
+        let centers32 = centers.iter().map(|&v| v as f32).collect();
+        let tangent32 = tangent.iter().map(|&v| v as f32).collect();
         BallData {
             d,
             x_ord,
             order,
             pos_of,
             ranges,
-            centers,
             c_norm,
             radii,
             to_center,
             ball_of,
-            tangent,
             box_lo,
             box_hi,
             r_perp,
             row_tan,
             row_perp,
             uc,
+            centers32,
+            tangent32,
+            c_err,
             eta,
         }
     }
@@ -360,6 +373,7 @@ impl BallData {
             qorder.sort_by_key(|&q| (cluster(q), q));
         }
         let q_rows = queries.gather(Some(&qorder), scale);
+        let q32: Vec<f32> = q_rows.iter().map(|&v| v as f32).collect();
         let hints: Option<Vec<usize>> = hint.map(|h| qorder.iter().map(|&q| h[q]).collect());
         let keys: Vec<u32> = qorder.iter().map(|&q| cluster(q)).collect();
         // Blocks: the queries whose guesses share a ball (they search the
@@ -386,7 +400,7 @@ impl BallData {
         }
         let m = self.ranges.len();
         let d = self.d;
-        let centers = MatRef::from_row_major_slice(&self.centers, m, d);
+        let centers = MatRef::from_row_major_slice(&self.centers32, m, d);
         let found: Vec<Vec<usize>> = supers
             .par_iter()
             .map_init(
@@ -404,7 +418,7 @@ impl BallData {
                         faer::MatMut::from_column_major_slice_mut(&mut g[..m * slen], m, slen),
                         Accum::Replace,
                         centers,
-                        MatRef::from_row_major_slice(&q_rows[s0 * d..(s0 + slen) * d], slen, d)
+                        MatRef::from_row_major_slice(&q32[s0 * d..(s0 + slen) * d], slen, d)
                             .transpose(),
                         1.0,
                         Par::Seq,
@@ -414,7 +428,7 @@ impl BallData {
                         let gb = &g[(q0 - s0) * m..(q0 - s0 + len) * m];
                         out.extend(ball_block(
                             self,
-                            &q_rows,
+                            (&q_rows, &q32),
                             hints.as_deref(),
                             q0,
                             len,
@@ -439,18 +453,20 @@ impl BallData {
 struct BallWork {
     /// Dot products of the centres with a super-block's queries (m per
     /// query).
-    g: Vec<f64>,
+    g: Vec<f32>,
     /// Per query of the block (column) and ball: the plain bound's margin
     /// (≤ 0: the ball may hold the nearest row).
     pass: Vec<f64>,
     /// Per ball: its slot among the block's candidate balls (or `u32::MAX`).
     slot: Vec<u32>,
     /// The candidate balls' directions (row-major, `TANGENT` rows each).
-    ut: Vec<f64>,
+    ut: Vec<f32>,
     /// Their dot products with the block's queries (one column per query).
-    tq: Mat<f64>,
+    tq: Mat<f32>,
     /// Per query: |q|², the best (distance², original index) so far.
     qn: Vec<f64>,
+    q_err: Vec<f64>,
+    t_err: Vec<f64>,
     best: Vec<(f64, usize)>,
     /// Balls to visit: (bound², ball, tangent data).
     visit: Vec<(f64, u32, Tangent)>,
@@ -467,6 +483,8 @@ impl BallWork {
             ut: Vec::new(),
             tq: Mat::zeros(0, 0),
             qn: vec![0.0; QUERY_BLOCK],
+            q_err: vec![0.0; QUERY_BLOCK],
+            t_err: vec![0.0; QUERY_BLOCK],
             best: vec![(0.0, 0); QUERY_BLOCK],
             visit: Vec::new(),
             row_lb: Vec::new(),
@@ -484,16 +502,18 @@ crate::cpu::dispatched! {
     /// filtered by the same bound per row, the rest measured exactly.
     fn ball_block(
         this: &BallData,
-        q_rows: &[f64],
+        queries: (&[f64], &[f32]),
         hint: Option<&[usize]>,
         q0: usize,
         len: usize,
-        gb: &[f64],
+        gb: &[f32],
         work: &mut BallWork,
     ) -> Vec<usize> {
         let (d, m, nx) = (this.d, this.ranges.len(), this.order.len());
+        // The queries in f64 (for the exact distances) and f32 (the GEMMs).
+        let (q_rows, q32) = queries;
         let sl = slack(d);
-        let qb = MatRef::from_row_major_slice(&q_rows[q0 * d..(q0 + len) * d], len, d);
+        let qb = MatRef::from_row_major_slice(&q32[q0 * d..(q0 + len) * d], len, d);
         // Plain loops, no closures: closures would not be compiled for the
         // instruction set this function is dispatched to.
         let mut n_cand = 0usize;
@@ -504,6 +524,10 @@ crate::cpu::dispatched! {
                 qn += v * v;
             }
             work.qn[i] = qn;
+            // The error of the f32 products with this query: its share of
+            // 2 q·c's, and each coordinate along a direction.
+            work.q_err[i] = cross_err(d, qn, 0.0);
+            work.t_err[i] = cross_err(d, qn, 1.0 + this.eta);
             // (distance², original index): ties go to the smaller index.
             let mut best = (f64::INFINITY, usize::MAX);
             if let Some(&h) = hint.and_then(|h| h.get(q0 + i))
@@ -520,22 +544,25 @@ crate::cpu::dispatched! {
             if !(reach < f64::INFINITY) {
                 for j in 0..m {
                     let s = qn + this.c_norm[j];
-                    let hi = (s - 2.0 * g[j] + sl * s).max(0.0).sqrt() * (1.0 + sl);
+                    let e2 = work.q_err[i] + this.c_err[j];
+                    let hi = (s - 2.0 * f64::from(g[j]) + sl * s + e2).max(0.0).sqrt() * (1.0 + sl);
                     let far = (hi + this.radii[j]) * (1.0 + sl);
                     reach = if far < reach { far } else { reach };
                 }
             }
             // The plain bound (|q − c| − r)₊ at most the reach: |q − c|²
             // (from the GEMM, lowered by the slack) at most (reach + r)².
+            let q_err = work.q_err[i];
             let pass = &mut work.pass[i * m..(i + 1) * m];
-            for (((p, &cn), &gj), &r) in pass
+            for ((((p, &cn), &gj), &r), &ce) in pass
                 .iter_mut()
                 .zip(&this.c_norm[..m])
                 .zip(g)
                 .zip(&this.radii[..m])
+                .zip(&this.c_err[..m])
             {
                 let s = qn + cn;
-                let lo2 = (s - 2.0 * gj - sl * s) * (1.0 - 3.0 * sl);
+                let lo2 = (s - 2.0 * f64::from(gj) - sl * s - (q_err + ce)) * (1.0 - 3.0 * sl);
                 let far = reach + r;
                 *p = lo2 - far * far;
             }
@@ -554,7 +581,7 @@ crate::cpu::dispatched! {
                 work.slot[j] = n_cand as u32;
                 n_cand += 1;
                 work.ut
-                    .extend_from_slice(&this.tangent[j * TANGENT * d..(j + 1) * TANGENT * d]);
+                    .extend_from_slice(&this.tangent32[j * TANGENT * d..(j + 1) * TANGENT * d]);
             }
         }
         if work.tq.nrows() < n_cand * TANGENT || work.tq.ncols() < len {
@@ -580,7 +607,15 @@ crate::cpu::dispatched! {
                     continue;
                 }
                 let s = work.slot[j] as usize;
-                let tb = tangent_bound(this, j, qn, g[j], &tcol[s * TANGENT..(s + 1) * TANGENT], sl);
+                let mut uq = [0.0; TANGENT];
+                for t in 0..TANGENT {
+                    uq[t] = f64::from(tcol[s * TANGENT + t]);
+                }
+                let err = Err32 {
+                    qc: work.q_err[i] + this.c_err[j],
+                    uq: work.t_err[i],
+                };
+                let tb = tangent_bound(this, j, qn, f64::from(g[j]), &uq, err, sl);
                 if tb.lb2 <= best.0 {
                     work.visit.push((tb.lb2, j as u32, tb));
                 }
@@ -643,13 +678,21 @@ crate::cpu::dispatched! {
 /// − Uc` (`uq` = Uq), each moved the safe way by the slack `sl` relative
 /// to the norms involved.
 #[inline(always)]
-fn tangent_bound(this: &BallData, j: usize, qn: f64, qc: f64, uq: &[f64], sl: f64) -> Tangent {
+fn tangent_bound(
+    this: &BallData,
+    j: usize,
+    qn: f64,
+    qc: f64,
+    uq: &[f64],
+    err: Err32,
+    sl: f64,
+) -> Tangent {
     let s = qn + this.c_norm[j];
-    let v2_lo = (s - 2.0 * qc - sl * s).max(0.0);
-    let v2_hi = (s - 2.0 * qc + sl * s).max(0.0);
+    let v2_lo = (s - 2.0 * qc - sl * s - err.qc).max(0.0);
+    let v2_hi = (s - 2.0 * qc + sl * s + err.qc).max(0.0);
     let dc_lo = v2_lo.sqrt() * (1.0 - sl);
     let dc_hi = v2_hi.sqrt() * (1.0 + sl);
-    let eps = sl * (qn.sqrt() + this.c_norm[j].sqrt()) + f64::MIN_POSITIVE;
+    let eps = sl * (qn.sqrt() + this.c_norm[j].sqrt()) + err.uq + f64::MIN_POSITIVE;
     let (lo, hi) = (
         &this.box_lo[j * TANGENT..(j + 1) * TANGENT],
         &this.box_hi[j * TANGENT..(j + 1) * TANGENT],
@@ -677,6 +720,22 @@ fn tangent_bound(this: &BallData, j: usize, qn: f64, qc: f64, uq: &[f64], sl: f6
         dc_lo,
         dc_hi,
     }
+}
+
+/// Bounds on the errors of [`tangent_bound`]'s inputs computed in f32:
+/// `2 q·c` (`qc`) and each `u·q` (`uq`).
+#[derive(Clone, Copy)]
+struct Err32 {
+    qc: f64,
+    uq: f64,
+}
+
+/// A bound on the error of `2 x·y` computed as an f32 dot product of f32
+/// copies, `|x|² = xn`, `|y|² = yn` ([`score_err`]); additive in the two
+/// norms' shares, so a query's share and a centre's can be summed (the
+/// constant part then counted twice).
+fn cross_err(d: usize, xn: f64, yn: f64) -> f64 {
+    score_err(d, xn, yn)
 }
 
 /// [`tangent_bound`]'s results: the ball's bound, the query's

@@ -256,10 +256,11 @@ pub enum NnStrategy {
     /// [`NnParams::partition`] or computed), each bounded by a ball and by
     /// a *tangent box* (its spread along a few principal directions, and
     /// its distance from their span); each query bounds its distance to
-    /// every cluster (two f64 GEMMs per block of queries) and visits,
-    /// nearest bound first, only the clusters, then the rows, that can be
-    /// nearer than its best so far (its guess, when given), with exact f64
-    /// distances. No f32 and no matrix units: on spectral embeddings with
+    /// every cluster (two f32 GEMMs per block of queries, their rounding
+    /// bounded) and visits, nearest bound first, only the clusters, then
+    /// the rows, that can be nearer than its best so far (its guess, when
+    /// given), with exact f64 distances. No matrix units: on spectral
+    /// embeddings with
     /// the previous iteration's map as guesses a query measures ~3 rows
     /// (FAUST, 5k vertices, k = 100).
     Balls,
