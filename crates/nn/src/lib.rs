@@ -144,46 +144,39 @@ pub enum Error {
     },
 }
 
-/// The first non-finite entry of `m` (column by column), as an error of
-/// `side`. A sum per column catches NaN and infinities cheaply; only a
-/// column whose sum is not finite (or overflowed) is scanned entry by
-/// entry.
+/// The first non-finite entry of `m` (line by line), as an error of
+/// `side`. A sum per column (per row for a row-major view: along the
+/// contiguous direction) catches NaN and infinities cheaply; only a line
+/// whose sum is not finite (or overflowed) is scanned entry by entry.
 fn check_finite(m: MatRef<'_, f64>, side: &'static str) -> Result<()> {
-    if m.col_stride() == 1 && m.ncols() > 1 {
-        // Row-major: row by row.
-        for i in 0..m.nrows() {
-            let row = m.row(i);
-            let sum: f64 = match row.try_as_row_major() {
-                Some(r) => r.as_slice().iter().sum(),
-                None => (0..m.ncols()).map(|j| row[j]).sum(),
-            };
-            if !sum.is_finite()
-                && let Some(j) = (0..m.ncols()).find(|&j| !row[j].is_finite())
-            {
-                return Err(Error::NonFinite {
-                    side,
-                    row: i,
-                    col: j,
-                    value: row[j],
-                });
-            }
-        }
-        return Ok(());
-    }
-    for j in 0..m.ncols() {
-        let col = m.col(j);
-        let sum: f64 = match col.try_as_col_major() {
-            Some(c) => c.as_slice().iter().sum(),
-            None => (0..m.nrows()).map(|i| col[i]).sum(),
+    let by_rows = m.col_stride() == 1 && m.ncols() > 1;
+    // Lines along the contiguous direction: (row, column) of entry t of
+    // line l.
+    let (lines, len) = if by_rows {
+        (m.nrows(), m.ncols())
+    } else {
+        (m.ncols(), m.nrows())
+    };
+    let at = |l: usize, t: usize| if by_rows { (l, t) } else { (t, l) };
+    for l in 0..lines {
+        let contiguous = if by_rows {
+            m.row(l).try_as_row_major().map(|r| r.as_slice())
+        } else {
+            m.col(l).try_as_col_major().map(|c| c.as_slice())
+        };
+        let sum: f64 = match contiguous {
+            Some(s) => s.iter().sum(),
+            None => (0..len).map(|t| m[at(l, t)]).sum(),
         };
         if !sum.is_finite()
-            && let Some(i) = (0..m.nrows()).find(|&i| !col[i].is_finite())
+            && let Some(t) = (0..len).find(|&t| !m[at(l, t)].is_finite())
         {
+            let (row, col) = at(l, t);
             return Err(Error::NonFinite {
                 side,
-                row: i,
-                col: j,
-                value: col[i],
+                row,
+                col,
+                value: m[(row, col)],
             });
         }
     }
