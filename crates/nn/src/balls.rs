@@ -454,11 +454,17 @@ struct BallWork {
     /// Dot products of the centres with a super-block's queries (m per
     /// query).
     g: Vec<f32>,
-    /// Per query of the block (column) and ball: the plain bound's margin
-    /// (≤ 0: the ball may hold the nearest row).
+    /// Per ball, for the query at hand: the plain bound's margin (≤ 0:
+    /// the ball may hold the nearest row).
     pass: Vec<f64>,
-    /// Per ball: its slot among the block's candidate balls (or `u32::MAX`).
+    /// The balls that pass, query after query (query i's from
+    /// `p_start[i]` to `p_start[i + 1]`).
+    p_list: Vec<u32>,
+    p_start: Vec<usize>,
+    /// Per ball: its slot among the block's candidate balls (or `u32::MAX`),
+    /// and the candidates (to reset their slots).
     slot: Vec<u32>,
+    cands: Vec<u32>,
     /// The candidate balls' directions (row-major, `TANGENT` rows each).
     ut: Vec<f32>,
     /// Their dot products with the block's queries (one column per query).
@@ -478,7 +484,10 @@ impl BallWork {
     fn new(m: usize) -> BallWork {
         BallWork {
             g: Vec::new(),
-            pass: vec![0.0; m * QUERY_BLOCK],
+            pass: vec![0.0; m],
+            p_list: Vec::new(),
+            p_start: Vec::with_capacity(QUERY_BLOCK + 1),
+            cands: Vec::new(),
             slot: vec![u32::MAX; m],
             ut: Vec::new(),
             tq: Mat::zeros(0, 0),
@@ -516,7 +525,8 @@ crate::cpu::dispatched! {
         let qb = MatRef::from_row_major_slice(&q32[q0 * d..(q0 + len) * d], len, d);
         // Plain loops, no closures: closures would not be compiled for the
         // instruction set this function is dispatched to.
-        let mut n_cand = 0usize;
+        work.p_list.clear();
+        work.p_start.clear();
         for i in 0..len {
             let q = &q_rows[(q0 + i) * d..(q0 + i + 1) * d];
             let mut qn = 0.0;
@@ -553,7 +563,7 @@ crate::cpu::dispatched! {
             // The plain bound (|q − c| − r)₊ at most the reach: |q − c|²
             // (from the GEMM, lowered by the slack) at most (reach + r)².
             let q_err = work.q_err[i];
-            let pass = &mut work.pass[i * m..(i + 1) * m];
+            let pass = &mut work.pass[..m];
             for ((((p, &cn), &gj), &r), &ce) in pass
                 .iter_mut()
                 .zip(&this.c_norm[..m])
@@ -566,24 +576,34 @@ crate::cpu::dispatched! {
                 let far = reach + r;
                 *p = lo2 - far * far;
             }
+            // The passing balls' list, written branch-free (every index
+            // stored, the count advanced only past those that pass).
+            let base = work.p_list.len();
+            work.p_start.push(base);
+            work.p_list.resize(base + m, 0);
+            let list = &mut work.p_list[base..];
+            let mut n = 0;
             for j in 0..m {
-                if pass[j] <= 0.0 {
-                    work.slot[j] = 0;
-                }
+                list[n] = j as u32;
+                n += usize::from(pass[j] <= 0.0);
             }
+            work.p_list.truncate(base + n);
         }
-        // The candidate balls' directions against every query of the
-        // block.
-        // Slots numbered in ball order.
+        work.p_start.push(work.p_list.len());
+        // The candidate balls (those that pass for some query): their
+        // directions against every query of the block.
         work.ut.clear();
-        for j in 0..m {
-            if work.slot[j] != u32::MAX {
-                work.slot[j] = n_cand as u32;
-                n_cand += 1;
+        work.cands.clear();
+        for &j in &work.p_list {
+            let j = j as usize;
+            if work.slot[j] == u32::MAX {
+                work.slot[j] = work.cands.len() as u32;
+                work.cands.push(j as u32);
                 work.ut
                     .extend_from_slice(&this.tangent32[j * TANGENT * d..(j + 1) * TANGENT * d]);
             }
         }
+        let n_cand = work.cands.len();
         if work.tq.nrows() < n_cand * TANGENT || work.tq.ncols() < len {
             work.tq = Mat::zeros(n_cand * TANGENT, QUERY_BLOCK);
         }
@@ -602,10 +622,8 @@ crate::cpu::dispatched! {
             let g = &gb[i * m..(i + 1) * m];
             let tcol = &work.tq.col_as_slice(i)[..n_cand * TANGENT];
             work.visit.clear();
-            for j in 0..m {
-                if work.pass[i * m + j] > 0.0 {
-                    continue;
-                }
+            for pi in work.p_start[i]..work.p_start[i + 1] {
+                let j = work.p_list[pi] as usize;
                 let s = work.slot[j] as usize;
                 let mut uq = [0.0; TANGENT];
                 for t in 0..TANGENT {
@@ -661,8 +679,8 @@ crate::cpu::dispatched! {
             }
             out.push(best.1);
         }
-        for j in 0..m {
-            work.slot[j] = u32::MAX;
+        for &j in &work.cands {
+            work.slot[j as usize] = u32::MAX;
         }
         out
     }
