@@ -253,9 +253,8 @@ pub enum NnStrategy {
     /// bounded) and visits, nearest bound first, only the clusters, then
     /// the rows, that can be nearer than its best so far (its guess, when
     /// given), with exact f64 distances. No matrix units: on spectral
-    /// embeddings with
-    /// the previous iteration's map as guesses a query measures ~3 rows
-    /// (FAUST, 5k vertices, k = 100).
+    /// embeddings with the previous iteration's map as guesses a query
+    /// measures ~3 rows (FAUST, 5k vertices, k = 100).
     Balls,
     /// Every pair ranked in the full dimension on the CPU's matrix tiles
     /// (Intel AMX: bf16 products, f32 sums, ~6x the f32 GEMM rate); the
