@@ -99,7 +99,8 @@ pub(crate) struct BallData {
     /// orthonormal directions (row-major, `TANGENT x d`; unused ones zero)
     /// spanning most of its rows' spread, in f32: the GEMMs' operands,
     /// whose products carry the error bound [`score_err`]; each centre's
-    /// share of that bound.
+    /// share of that bound (additive in the two norms: a query's share and
+    /// a centre's are summed, the constant part then counted twice).
     centers32: Vec<f32>,
     tangent32: Vec<f32>,
     c_err: Vec<f64>,
@@ -183,12 +184,7 @@ impl BallData {
     /// linear map: ZoomOut's `Φ_A Cᵀ`), else a k-means partition of the
     /// data itself.
     pub(crate) fn new(data: &DMatrix<f64>, partition: Option<&Partition>) -> BallData {
-        let rows = Rows::of(MatRef::from_column_major_slice(
-            data.as_slice(),
-            data.nrows(),
-            data.ncols(),
-        ));
-        BallData::from_rows(&rows, partition, None)
+        BallData::from_rows(&Rows::of(crate::view(data)), partition, None)
     }
 
     /// [`BallData::new`] of the rows `data`, each multiplied by `scale`
@@ -314,7 +310,7 @@ impl BallData {
             .chunks_exact(d)
             .map(|c| c.iter().map(|v| v * v).sum())
             .collect();
-        let c_err = c_norm.iter().map(|&cn| cross_err(d, 0.0, cn)).collect();
+        let c_err = c_norm.iter().map(|&cn| score_err(d, 0.0, cn)).collect();
         let centers32 = centers.iter().map(|&v| v as f32).collect();
         let tangent32 = tangent.iter().map(|&v| v as f32).collect();
         BallData {
@@ -343,12 +339,7 @@ impl BallData {
     /// The nearest data row of every query (same width as the data);
     /// `hint`: one guess per query (out-of-range entries: no guess).
     pub(crate) fn search(&self, queries: &DMatrix<f64>, hint: Option<&[usize]>) -> Vec<usize> {
-        let rows = Rows::of(MatRef::from_column_major_slice(
-            queries.as_slice(),
-            queries.nrows(),
-            queries.ncols(),
-        ));
-        self.search_rows(&rows, hint, None)
+        self.search_rows(&Rows::of(crate::view(queries)), hint, None)
     }
 
     /// [`BallData::search`] of the rows `queries`, each multiplied by
@@ -536,8 +527,8 @@ crate::cpu::dispatched! {
             work.qn[i] = qn;
             // The error of the f32 products with this query: its share of
             // 2 q·c's, and each coordinate along a direction.
-            work.q_err[i] = cross_err(d, qn, 0.0);
-            work.t_err[i] = cross_err(d, qn, 1.0 + this.eta);
+            work.q_err[i] = score_err(d, qn, 0.0);
+            work.t_err[i] = score_err(d, qn, 1.0 + this.eta);
             // (distance², original index): ties go to the smaller index.
             let mut best = (f64::INFINITY, usize::MAX);
             if let Some(&h) = hint.and_then(|h| h.get(q0 + i))
@@ -746,14 +737,6 @@ fn tangent_bound(
 struct Err32 {
     qc: f64,
     uq: f64,
-}
-
-/// A bound on the error of `2 x·y` computed as an f32 dot product of f32
-/// copies, `|x|² = xn`, `|y|² = yn` ([`score_err`]); additive in the two
-/// norms' shares, so a query's share and a centre's can be summed (the
-/// constant part then counted twice).
-fn cross_err(d: usize, xn: f64, yn: f64) -> f64 {
-    score_err(d, xn, yn)
 }
 
 /// [`tangent_bound`]'s results: the ball's bound, the query's

@@ -17,8 +17,8 @@ fn bound(b: &BallData, j: usize, qi: &[f64]) -> Tangent {
         .map(|t| dot32(&b.tangent32[(j * TANGENT + t) * d..(j * TANGENT + t + 1) * d]))
         .collect();
     let err = Err32 {
-        qc: cross_err(d, qn, 0.0) + b.c_err[j],
-        uq: cross_err(d, qn, 1.0 + b.eta),
+        qc: score_err(d, qn, 0.0) + b.c_err[j],
+        uq: score_err(d, qn, 1.0 + b.eta),
     };
     tangent_bound(b, j, qn, qc, &uq, err, slack(d))
 }

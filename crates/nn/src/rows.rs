@@ -60,9 +60,7 @@ impl<'a> Rows<'a> {
         // stride 1) or of the copy, both alive for 'a / self.
         unsafe { std::slice::from_raw_parts(self.ptr.add(i * self.stride), self.d) }
     }
-}
 
-impl Rows<'_> {
     /// The rows `order` (all, in order, when `None`), row-major, each
     /// multiplied by `scale` when given (a power of two: exact).
     pub(crate) fn gather(&self, order: Option<&[usize]>, scale: Option<f64>) -> Vec<f64> {
@@ -108,16 +106,10 @@ pub(crate) fn dist2(a: &[f64], b: &[f64]) -> f64 {
 /// keep both the column reads and the row writes in cache.
 pub(crate) fn row_major(m: &DMatrix<f64>, order: Option<&[usize]>) -> Vec<f64> {
     let (n, d) = m.shape();
-    let t = rows_of(MatRef::from_column_major_slice(m.as_slice(), n, d));
+    let t = MatRef::from_column_major_slice(m.as_slice(), n, d);
     match order {
-        None => t,
-        Some(order) => {
-            let mut out = vec![0.0; n * d];
-            for (dst, &i) in out.chunks_exact_mut(d.max(1)).zip(order) {
-                dst.copy_from_slice(&t[i * d..(i + 1) * d]);
-            }
-            out
-        }
+        None => rows_of(t),
+        Some(order) => Rows::of(t).gather(Some(order), None),
     }
 }
 
