@@ -57,6 +57,7 @@ pub mod conformance;
 mod dense;
 mod error;
 mod factor;
+mod gram;
 mod native;
 mod verify;
 

@@ -235,12 +235,12 @@ fn krylov_schur(
             // criterion), which is when that is not enough.
             let lo = if c == block_start { 0 } else { c - b };
             coef.fill(0.0);
-            project_out(&v, n, lo, cb, &mut w, b, &mut coef, par);
+            project_out(&v, n, lo, cb, &mut w, b, &mut coef, p.threads);
             let before: Vec<f64> = w.chunks(n).map(norm).collect();
-            project_out(&v, n, 0, cb, &mut w, b, &mut coef, par);
+            project_out(&v, n, 0, cb, &mut w, b, &mut coef, p.threads);
             let after: Vec<f64> = w.chunks(n).map(norm).collect();
             if before.iter().zip(&after).any(|(x, y)| *y < 0.5 * x) {
-                project_out(&v, n, 0, cb, &mut w, b, &mut coef, par);
+                project_out(&v, n, 0, cb, &mut w, b, &mut coef, p.threads);
             }
             let pre_norms = before;
             for j in 0..b {
@@ -403,8 +403,11 @@ fn restart_in_place(v: &mut [f64], n: usize, m: usize, y: MatRef<'_, f64>, par: 
 }
 
 /// Projects columns `lo..hi` of the orthonormal basis `v` out of the n x b
-/// block `w` (one classical Gram–Schmidt pass as two GEMMs), adding the
-/// coefficients to rows `lo..hi` of `coef`.
+/// block `w` (one classical Gram–Schmidt pass, `C = Vᵀ W` and `W −= V C`),
+/// adding the coefficients to rows `lo..hi` of `coef`. With AVX-512 the
+/// kernels of `gram` run (they read V in contiguous runs); elsewhere
+/// faer's GEMM, which was faster there (the kernels' accumulators do not
+/// fit in 16 AVX2 registers).
 #[allow(clippy::too_many_arguments)]
 fn project_out(
     v: &[f64],
@@ -414,34 +417,46 @@ fn project_out(
     w: &mut [f64],
     b: usize,
     coef: &mut Mat<f64>,
-    par: faer::Par,
+    threads: usize,
 ) {
-    let vb = MatRef::from_column_major_slice(&v[lo * n..hi * n], n, hi - lo);
-    let mut wm = MatMut::from_column_major_slice_mut(w, n, b);
-    // Transposed, `Cᵀ = Wᵀ V` and `Wᵀ −= Cᵀ Vᵀ`: the same sums to the last
-    // bit as `C = Vᵀ W`, `W −= V C`, but with the wide V on the right faer's
-    // GEMM skips repacking it, 1.4–1.7x faster for these shapes (n x
-    // hundreds against n x b; the eigensolve at 5k, k = 200: 15–25% less).
-    let mut ct = Mat::<f64>::zeros(b, hi - lo);
-    matmul(
-        ct.as_mut(),
-        Accum::Replace,
-        wm.rb().transpose(),
-        vb,
-        1.0,
-        par,
-    );
-    matmul(
-        wm.rb_mut().transpose_mut(),
-        Accum::Add,
-        ct.as_ref(),
-        vb.transpose(),
-        -1.0,
-        par,
-    );
+    let cols = hi - lo;
+    let vb = &v[lo * n..hi * n];
+    let mut ct = vec![0.0; b * cols];
+    if fmaps_simd::simd_level() == fmaps_simd::SimdLevel::Avx512 {
+        crate::gram::project(vb, n, w, b, &mut ct, threads);
+    } else {
+        let vm = MatRef::from_column_major_slice(vb, n, cols);
+        let mut wm = MatMut::from_column_major_slice_mut(w, n, b);
+        let mut ctm = Mat::<f64>::zeros(b, cols);
+        // Transposed, `Cᵀ = Wᵀ V` and `Wᵀ −= Cᵀ Vᵀ`: the same sums as
+        // `C = Vᵀ W`, `W −= V C`, but with the wide V on the right faer's
+        // GEMM skips repacking it (1.4–1.7x faster for these shapes).
+        let par = par_of(threads);
+        matmul(
+            ctm.as_mut(),
+            Accum::Replace,
+            wm.rb().transpose(),
+            vm,
+            1.0,
+            par,
+        );
+        matmul(
+            wm.rb_mut().transpose_mut(),
+            Accum::Add,
+            ctm.as_ref(),
+            vm.transpose(),
+            -1.0,
+            par,
+        );
+        for j in 0..b {
+            for i in 0..cols {
+                ct[j * cols + i] = ctm[(j, i)];
+            }
+        }
+    }
     for j in 0..b {
-        for i in 0..hi - lo {
-            coef[(lo + i, j)] += ct[(j, i)];
+        for i in 0..cols {
+            coef[(lo + i, j)] += ct[j * cols + i];
         }
     }
 }
