@@ -30,6 +30,7 @@ const CATEGORIES: &[&str] = &[
     "command-line-utilities",
     "data-structures",
     "graphics",
+    "hardware-support",
     "mathematics",
     "parser-implementations",
     "rendering",

@@ -333,13 +333,11 @@ fn krylov_schur(
             }
             let y = gather_columns(u, &order[..k]);
             let mut psi = vec![0.0; n * k];
-            let vm = MatRef::from_column_major_slice(&v[..m * n], n, m);
-            matmul(
-                MatMut::from_column_major_slice_mut(&mut psi, n, k),
-                Accum::Replace,
-                vm,
+            basis_times(
+                &v[..m * n],
+                n,
                 y.as_ref(),
-                1.0,
+                MatMut::from_column_major_slice_mut(&mut psi, n, k),
                 par,
             );
             return Ok((theta[..k].to_vec(), psi, restarts, applies));
@@ -375,27 +373,51 @@ fn krylov_schur(
     }
 }
 
-/// Overwrites the first `keep` columns of the basis with `V[:, 0..m] · Y`
-/// (Y is m x keep), a row chunk at a time: rows are independent, so a small
-/// temporary suffices instead of an n x keep copy of the basis.
-fn restart_in_place(v: &mut [f64], n: usize, m: usize, y: MatRef<'_, f64>, par: faer::Par) {
-    const CHUNK: usize = 512;
-    let keep = y.ncols();
-    let mut tmp = Mat::<f64>::zeros(CHUNK, keep);
-    let mut vm = MatMut::from_column_major_slice_mut(&mut v[..m * n], n, m);
+/// Rows of `V · Y` (V: the n x m column-major `v`, Y: m x cols) into `out`
+/// (n x cols), a chunk of rows at a time. Each chunk of V is first copied
+/// to a contiguous block: faer's GEMM then reads it without the stride n
+/// between columns.
+fn basis_times(v: &[f64], n: usize, y: MatRef<'_, f64>, mut out: MatMut<'_, f64>, par: faer::Par) {
+    let m = y.nrows();
+    let vm = MatRef::from_column_major_slice(v, n, m);
+    let mut a = Mat::<f64>::zeros(CHUNK.min(n), m);
     let mut r0 = 0;
     while r0 < n {
         let rows = CHUNK.min(n - r0);
-        let mut t = tmp.as_mut().subrows_mut(0, rows);
+        let mut ar = a.as_mut().subrows_mut(0, rows);
+        ar.copy_from(vm.submatrix(r0, 0, rows, m));
         matmul(
-            t.rb_mut(),
+            out.rb_mut().subrows_mut(r0, rows),
             Accum::Replace,
-            vm.rb().submatrix(r0, 0, rows, m),
+            ar.rb(),
             y,
             1.0,
             par,
         );
-        vm.rb_mut()
+        r0 += rows;
+    }
+}
+
+/// Rows per chunk of [`basis_times`] and [`restart_in_place`].
+const CHUNK: usize = 256;
+
+/// Overwrites the first `keep` columns of the basis with `V[:, 0..m] · Y`
+/// (Y is m x keep), a row chunk at a time: rows are independent, so a small
+/// temporary suffices instead of an n x keep copy of the basis.
+fn restart_in_place(v: &mut [f64], n: usize, m: usize, y: MatRef<'_, f64>, par: faer::Par) {
+    let keep = y.ncols();
+    let mut tmp = Mat::<f64>::zeros(CHUNK.min(n), keep);
+    let mut block = Mat::<f64>::zeros(CHUNK.min(n), m);
+    let mut r0 = 0;
+    while r0 < n {
+        let rows = CHUNK.min(n - r0);
+        // The chunk's rows of every column, contiguous (see basis_times);
+        // a copy anyway, since V's rows are then overwritten in place.
+        let mut b = block.as_mut().subrows_mut(0, rows);
+        b.copy_from(MatRef::from_column_major_slice(&v[..m * n], n, m).submatrix(r0, 0, rows, m));
+        let mut t = tmp.as_mut().subrows_mut(0, rows);
+        matmul(t.rb_mut(), Accum::Replace, b.rb(), y, 1.0, par);
+        MatMut::from_column_major_slice_mut(&mut v[..m * n], n, m)
             .submatrix_mut(r0, 0, rows, keep)
             .copy_from(t.rb());
         r0 += rows;

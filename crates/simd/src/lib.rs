@@ -32,6 +32,8 @@
 //!
 //! Nothing here can fail, so the crate has no error type.
 
+#![deny(missing_docs)]
+
 #[cfg(target_arch = "x86_64")]
 use std::sync::OnceLock;
 use std::sync::atomic::{AtomicU8, Ordering};
