@@ -48,7 +48,7 @@ pub(crate) fn project(
         macro_rules! go {
             ($($g:literal)*) => {
                 match g {
-                    $($g => project_group::<$g>(v, n, wg, cg, threads),)*
+                    $($g => project_group::<$g>(v, n, cols, wg, cg, threads),)*
                     _ => unreachable!("groups of at most {G} columns"),
                 }
             };
@@ -62,11 +62,11 @@ pub(crate) fn project(
 fn project_group<const K: usize>(
     v: &[f64],
     n: usize,
+    cols: usize,
     w: &mut [f64],
     ct: &mut [f64],
     threads: usize,
 ) {
-    let cols = v.len() / n;
     // C = Vᵀ W, column-major (ctc[c][j]): whole groups of Q basis columns
     // per thread.
     let mut ctc = vec![[0.0; K]; cols];

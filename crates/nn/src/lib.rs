@@ -144,6 +144,20 @@ pub enum Error {
     },
 }
 
+/// The sum of `s` in eight independent lanes (a plain running sum waits on
+/// each addition; this one vectorizes). Not finite when an entry is not
+/// (or the sum overflows).
+fn lane_sum(s: &[f64]) -> f64 {
+    let mut lanes = [0.0f64; 8];
+    let mut chunks = s.chunks_exact(8);
+    for c in &mut chunks {
+        for (l, v) in lanes.iter_mut().zip(c) {
+            *l += v;
+        }
+    }
+    lanes.iter().sum::<f64>() + chunks.remainder().iter().sum::<f64>()
+}
+
 /// The first non-finite entry of `m` (line by line), as an error of
 /// `side`. A sum per column (per row for a row-major view: along the
 /// contiguous direction) catches NaN and infinities cheaply; only a line
@@ -165,7 +179,7 @@ fn check_finite(m: MatRef<'_, f64>, side: &'static str) -> Result<()> {
             m.col(l).try_as_col_major().map(|c| c.as_slice())
         };
         let sum: f64 = match contiguous {
-            Some(s) => s.iter().sum(),
+            Some(s) => lane_sum(s),
             None => (0..len).map(|t| m[at(l, t)]).sum(),
         };
         if !sum.is_finite()
@@ -313,8 +327,6 @@ pub fn nearest_rows(
     if check_input(nx, d, queries, hint)? {
         return Ok(Vec::new());
     }
-    check_finite(data, "data")?;
-    check_finite(queries, "query")?;
     if d == 0 {
         // Every row is at distance 0: ties go to the smallest index.
         return Ok(vec![0; queries.nrows()]);
@@ -328,20 +340,25 @@ pub fn nearest_rows(
         hint.is_some(),
         partition.is_some(),
     );
+    if strategy == NnStrategy::Balls {
+        // Row by row from the views (no column-major copies): the data in
+        // its clusters' order, the queries in their guesses' order. The
+        // finiteness check and the scale in one pass per side.
+        // (Otherwise the checks below name the first entry that is not.)
+        let (x, q) = (Rows::of(data), Rows::of(queries));
+        if let (Some(mx), Some(mq)) = (x.max_abs_finite(), q.max_abs_finite()) {
+            let scale = scale_for(mx.max(mq));
+            return Ok(BallData::from_rows(&x, partition, scale).search_rows(&q, hint, scale));
+        }
+    }
+    check_finite(data, "data")?;
+    check_finite(queries, "query")?;
     if strategy == NnStrategy::Tiles {
         if let Some(found) = tiles::search_rows(Rows::of(data), Rows::of(queries), hint) {
             return Ok(found);
         }
         // No tiles here, or rows out of their range.
         strategy = NnStrategy::Brute;
-    }
-    if strategy == NnStrategy::Balls {
-        // Row by row from the views (no column-major copies): the data in
-        // its clusters' order, the queries in their guesses' order.
-        let (x, q) = (Rows::of(data), Rows::of(queries));
-        // (Both checked finite above.)
-        let scale = scale_for(x.max_abs().max(q.max_abs()));
-        return Ok(BallData::from_rows(&x, partition, scale).search_rows(&q, hint, scale));
     }
     Ok(search(
         &owned(data),

@@ -76,22 +76,29 @@ impl<'a> Rows<'a> {
         out
     }
 
-    /// The largest magnitude of the rows (0 when none), all finite.
-    pub(crate) fn max_abs(&self) -> f64 {
+    /// The largest magnitude of the rows (0 when none), or `None` when a
+    /// coordinate is not finite: one pass for the finiteness check and the
+    /// scale. (`v · 0` is 0 for every finite `v` and NaN otherwise, and a
+    /// sum of zeros cannot overflow.)
+    pub(crate) fn max_abs_finite(&self) -> Option<f64> {
         let mut lanes = [0.0f64; 8];
+        let mut zero = [0.0f64; 8];
         for i in 0..self.n {
             let r = self.row(i);
             let mut chunks = r.chunks_exact(8);
             for c in &mut chunks {
-                for (l, v) in lanes.iter_mut().zip(c) {
+                for ((l, z), v) in lanes.iter_mut().zip(&mut zero).zip(c) {
                     *l = l.max(v.abs());
+                    *z += v * 0.0;
                 }
             }
-            for (l, v) in lanes.iter_mut().zip(chunks.remainder()) {
+            for ((l, z), v) in lanes.iter_mut().zip(&mut zero).zip(chunks.remainder()) {
                 *l = l.max(v.abs());
+                *z += v * 0.0;
             }
         }
-        lanes.into_iter().fold(0.0, f64::max)
+        let finite = zero.iter().sum::<f64>() == 0.0;
+        finite.then(|| lanes.into_iter().fold(0.0, f64::max))
     }
 }
 

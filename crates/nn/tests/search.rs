@@ -444,6 +444,33 @@ fn bad_input_is_an_error() {
         Searcher::new(view(&bad), &p),
         Err(Error::NonFinite { row: 12, .. })
     ));
+    // The ball search checks finiteness in its own pass (with the scale):
+    // the same errors, data first.
+    let balls = NnParams::with_strategy(fmaps_nn::NnStrategy::Balls)
+        .with_partition(fmaps_nn::Partition::kmeans(view(&x), 8, 2));
+    assert!(matches!(
+        nearest_rows(view(&x), view(&q), None, &balls),
+        Err(Error::NonFinite {
+            side: "query",
+            row: 7,
+            col: 4,
+            ..
+        })
+    ));
+    assert!(matches!(
+        nearest_rows(view(&bad), view(&q), None, &balls),
+        Err(Error::NonFinite {
+            side: "data",
+            row: 12,
+            col: 1,
+            ..
+        })
+    ));
+    q[(7, 4)] = 0.5;
+    assert_eq!(
+        nearest_rows(view(&x), view(&q), None, &balls).unwrap(),
+        nearest_rows(view(&x), view(&q), None, &p).unwrap()
+    );
     // Huge finite values whose column sums overflow are not an error.
     let big = DMatrix::from_fn(4, 2, |i, _| 1e308 * (1.0 - i as f64 * 0.1));
     assert_eq!(
