@@ -736,8 +736,15 @@ pub fn refine_result(
     // A point map A -> B pulls functions back from B to A, so T_AB goes
     // with C_BA: the refiner's (c_ab, basis_a, basis_b) -> t_ba contract
     // is applied to the pair (B, A), and its t_ba is our T_AB.
-    let refined =
-        refiner.refine_with_geometry(&out.c_ba, &b.basis, &a.basis, b.geometry(), a.geometry())?;
+    // The unrefined point map is the conversion of C_BA that the
+    // refiner's first search repeats: its guess.
+    let refined = refiner.refine_with_guess(
+        &out.c_ba,
+        &b.basis,
+        &a.basis,
+        (b.geometry(), a.geometry()),
+        &out.t_ab,
+    )?;
     out.c_ba = refined.c_ab;
     out.t_ab = refined.t_ba;
     out.refine = Some(refined.report);

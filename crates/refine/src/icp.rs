@@ -56,6 +56,31 @@ impl Refiner for Icp {
         basis_a: &SpectralBasis,
         basis_b: &SpectralBasis,
     ) -> Result<Refined> {
+        self.run(c_ab, basis_a, basis_b, None)
+    }
+
+    fn refine_with_guess(
+        &self,
+        c_ab: &DMatrix<f64>,
+        basis_a: &SpectralBasis,
+        basis_b: &SpectralBasis,
+        _geometry: (crate::ShapeGeometry<'_>, crate::ShapeGeometry<'_>),
+        t_ba_guess: &[usize],
+    ) -> Result<Refined> {
+        self.run(c_ab, basis_a, basis_b, Some(t_ba_guess))
+    }
+}
+
+impl Icp {
+    /// [`Refiner::refine`], the first search starting from `guess` (a
+    /// vertex of A per vertex of B).
+    fn run(
+        &self,
+        c_ab: &DMatrix<f64>,
+        basis_a: &SpectralBasis,
+        basis_b: &SpectralBasis,
+        guess: Option<&[usize]>,
+    ) -> Result<Refined> {
         let t0 = Instant::now();
         let (kb, ka) = c_ab.shape();
         if ka == 0 || kb == 0 {
@@ -109,7 +134,8 @@ impl Refiner for Icp {
             Ok::<_, Error>(map)
         };
         let mut c = c_ab.clone();
-        let mut t_ba = nn(&c, None, &mut report)?;
+        let guess = guess.filter(|g| g.len() == basis_b.n());
+        let mut t_ba = nn(&c, guess, &mut report)?;
         for _ in 0..self.max_iterations {
             let ti = Instant::now();
             c = nearest_orthonormal(pullback(&t_ba, phi_a, ka, phi_b, kb, mass_b)?);

@@ -274,6 +274,25 @@ pub trait Refiner: Send + Sync {
         self.refine(c_ab, basis_a, basis_b)
     }
 
+    /// [`Refiner::refine_with_geometry`] given a guess of the point map
+    /// `T_BA` (one vertex of A per vertex of B), e.g. the conversion of
+    /// `c_ab` a pipeline has already made: refiners whose first step
+    /// converts `c_ab` by an exact nearest-neighbour search (ZoomOut, ICP)
+    /// start that search from the guess, which only makes it faster: the
+    /// result is the same for any guess. A guess of the wrong length is
+    /// ignored. Default: the guess is not used.
+    fn refine_with_guess(
+        &self,
+        c_ab: &DMatrix<f64>,
+        basis_a: &SpectralBasis,
+        basis_b: &SpectralBasis,
+        geometry: (ShapeGeometry<'_>, ShapeGeometry<'_>),
+        t_ba_guess: &[usize],
+    ) -> Result<Refined> {
+        let _ = t_ba_guess;
+        self.refine_with_geometry(c_ab, basis_a, basis_b, geometry.0, geometry.1)
+    }
+
     /// The same refiner for an initial map of size `k` when it reads a
     /// leading block of its input (ZoomOut and discrete optimisation start
     /// from `min(k_start, k)`), so that a pipeline can run it from initial

@@ -240,6 +240,32 @@ impl Refiner for ZoomOut {
         basis_a: &SpectralBasis,
         basis_b: &SpectralBasis,
     ) -> Result<Refined> {
+        self.run(c_ab, basis_a, basis_b, None)
+    }
+
+    fn refine_with_guess(
+        &self,
+        c_ab: &DMatrix<f64>,
+        basis_a: &SpectralBasis,
+        basis_b: &SpectralBasis,
+        _geometry: (crate::ShapeGeometry<'_>, crate::ShapeGeometry<'_>),
+        t_ba_guess: &[usize],
+    ) -> Result<Refined> {
+        self.run(c_ab, basis_a, basis_b, Some(t_ba_guess))
+    }
+}
+
+impl ZoomOut {
+    /// [`Refiner::refine`], the first search starting from `guess` (a
+    /// vertex of A per vertex of B; used only without samples, where the
+    /// searches run on all vertices).
+    fn run(
+        &self,
+        c_ab: &DMatrix<f64>,
+        basis_a: &SpectralBasis,
+        basis_b: &SpectralBasis,
+        guess: Option<&[usize]>,
+    ) -> Result<Refined> {
         let t0 = Instant::now();
         self.check(c_ab, basis_a, basis_b)?;
         let kf = self.k_final;
@@ -285,7 +311,11 @@ impl Refiner for ZoomOut {
             };
         let k0 = self.k_start;
         let mut c = c_ab.view((0, 0), (k0, k0)).into_owned();
-        let mut prev: Option<Vec<usize>> = None;
+        // The first search's guesses: the caller's, when they are vertices
+        // of A for every vertex of B (not on samples).
+        let mut prev: Option<Vec<usize>> = guess
+            .filter(|g| sub.is_none() && g.len() == basis_b.n())
+            .map(<[usize]>::to_vec);
         let mut prev_ab: Option<Vec<usize>> = None;
         let mut iterations = Vec::new();
         for k in self.schedule() {
@@ -302,7 +332,9 @@ impl Refiner for ZoomOut {
             c = next;
             iterations.push(Iteration {
                 k: (k, k),
-                changed: count_changed(prev.as_deref(), &t_ba),
+                // (The first iteration counts every point: the guess is
+                // not a map of this refinement.)
+                changed: count_changed(prev.as_deref().filter(|_| !iterations.is_empty()), &t_ba),
                 seconds: ti.elapsed().as_secs_f64(),
             });
             prev = Some(t_ba);

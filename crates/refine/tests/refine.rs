@@ -683,3 +683,56 @@ fn smooth_shells_reflects_for_a_mirrored_copy_and_the_orientation_score_tells() 
     assert!((right as f64) < 0.5 * n as f64, "{right} of {n} right");
     assert!(score > 0.5, "orientation score {score}");
 }
+
+/// A guess of the first point map (the pipeline passes its conversion of
+/// C) changes how fast the first search runs, never the result: ZoomOut
+/// and ICP give the same maps, C and iteration reports with the exact
+/// conversion, a wrong guess, out-of-range entries or a guess of the
+/// wrong length as without one.
+#[test]
+fn a_guess_of_the_first_map_changes_nothing() {
+    let p = pair(40, true);
+    let c = noisy(&true_fmap(&p, 40), 0.1, 7);
+    let n = p.t_ba.len();
+    let exact = point_map_from_fmap(
+        &c.view((0, 0), (20, 20)).into_owned(),
+        &p.basis_a,
+        &p.basis_b,
+    )
+    .unwrap();
+    let shifted: Vec<usize> = exact.iter().map(|&t| (t + 5) % n).collect();
+    let wild: Vec<usize> = (0..n).map(|i| if i % 2 == 0 { n + i } else { i }).collect();
+    let short = vec![0usize; n / 2];
+    fn geometry(m: &TriMesh) -> fmaps_refine::ShapeGeometry<'_> {
+        fmaps_refine::ShapeGeometry {
+            vertices: m.vertices(),
+            faces: m.faces(),
+        }
+    }
+    let refiners: [Box<dyn Refiner>; 2] = [Box::new(zoomout(20, 40)), Box::new(Icp::default())];
+    for r in &refiners {
+        let c0 = if r.name().starts_with("zoomout") {
+            c.clone()
+        } else {
+            c.view((0, 0), (20, 20)).into_owned()
+        };
+        let plain = r.refine(&c0, &p.basis_a, &p.basis_b).unwrap();
+        for guess in [&exact, &shifted, &wild, &short] {
+            let g = r
+                .refine_with_guess(
+                    &c0,
+                    &p.basis_a,
+                    &p.basis_b,
+                    (geometry(&p.a), geometry(&p.b)),
+                    guess,
+                )
+                .unwrap();
+            assert_eq!(g.t_ba, plain.t_ba, "{}", r.name());
+            assert_eq!(g.c_ab, plain.c_ab, "{}", r.name());
+            let changed = |x: &fmaps_refine::Refined| -> Vec<usize> {
+                x.report.iterations.iter().map(|i| i.changed).collect()
+            };
+            assert_eq!(changed(&g), changed(&plain), "{}", r.name());
+        }
+    }
+}
