@@ -1,7 +1,7 @@
 //! Checks shared by all backends: residuals, M-orthonormality, sign
 //! normalization, and a small deterministic random generator.
 
-use faer::linalg::matmul::matmul;
+use faer::linalg::matmul::triangular::{self, BlockStructure};
 use faer::{Accum, MatRef};
 use nalgebra::{DMatrix, DVector};
 
@@ -151,18 +151,22 @@ fn orthonormality_error(mass: &[f64], phi: &DMatrix<f64>, threads: usize) -> f64
     }
     let a = MatRef::from_column_major_slice(phi.as_slice(), n, k);
     let b = MatRef::from_column_major_slice(mphi.as_slice(), n, k);
+    // ΦᵀMΦ is symmetric: its lower triangle only (half the products).
     let mut g = faer::Mat::<f64>::zeros(k, k);
-    matmul(
+    triangular::matmul(
         &mut g,
+        BlockStructure::TriangularLower,
         Accum::Replace,
         a.transpose(),
+        BlockStructure::Rectangular,
         b,
+        BlockStructure::Rectangular,
         1.0,
         crate::factor::par_of(threads),
     );
     let mut e = 0.0f64;
-    for i in 0..k {
-        for j in 0..k {
+    for j in 0..k {
+        for i in j..k {
             let want = if i == j { 1.0 } else { 0.0 };
             e = e.max((g[(i, j)] - want).abs());
         }
@@ -246,6 +250,51 @@ mod tests {
                 "{r} vs {}",
                 s.sqrt()
             );
+        }
+    }
+
+    /// The orthonormality error is the largest entry of `|ΦᵀMΦ − I|`
+    /// (computed from one triangle: the Gram matrix is symmetric), wherever
+    /// it is: off the diagonal or on it.
+    #[test]
+    fn orthonormality_error_finds_the_largest_departure() {
+        let mass = [0.25, 1.0, 4.0, 1.0];
+        // M-unit columns: e_0 / 0.5, e_1, e_2 / 2, then combinations.
+        let unit = |i: usize| [2.0, 1.0, 0.5, 1.0][i];
+        let cols = |c: &[(usize, f64)]| {
+            let mut v = vec![0.0; 4];
+            for &(i, a) in c {
+                v[i] += a * unit(i);
+            }
+            v
+        };
+        // ⟨c0, c1⟩_M = 0.6 (both of M-norm 1); c2 has M-norm² 1.21.
+        let sets = [
+            (
+                vec![
+                    cols(&[(0, 1.0)]),
+                    cols(&[(0, 0.6), (1, 0.8)]),
+                    cols(&[(2, 1.0)]),
+                ],
+                0.6,
+            ),
+            (
+                vec![cols(&[(0, 1.0)]), cols(&[(1, 1.0)]), cols(&[(2, 1.1)])],
+                0.21,
+            ),
+            (
+                vec![
+                    cols(&[(3, 1.0)]),
+                    cols(&[(1, 1.0)]),
+                    cols(&[(0, -0.3), (2, 1.0)]),
+                ],
+                0.09,
+            ),
+        ];
+        for (set, want) in sets {
+            let phi = DMatrix::from_fn(4, set.len(), |i, c| set[c][i]);
+            let e = orthonormality_error(&mass, &phi, 1);
+            assert!((e - want).abs() < 1e-14, "{e} vs {want}");
         }
     }
 }

@@ -74,9 +74,10 @@ pub(crate) struct BallData {
     pos_of: Vec<u32>,
     /// (start, len) of each ball in ball order.
     ranges: Vec<(usize, usize)>,
-    /// The squared norms of the ball centres (means) and the balls' radii
-    /// (rounded up).
+    /// The squared norms of the ball centres (means), their square roots,
+    /// and the balls' radii (rounded up).
     c_norm: Vec<f64>,
+    c_len: Vec<f64>,
     radii: Vec<f64>,
     /// Each row's distance to its ball's centre (ball order).
     to_center: Vec<f64>,
@@ -117,15 +118,18 @@ pub(crate) const TANGENT: usize = 4;
 /// zeroed first) spanning most of the rows `e` (centred, row-major, `d`
 /// wide): greedy pivoted Gram–Schmidt (the row with the largest residual,
 /// normalised, orthogonalised twice against the directions before it,
-/// then removed from every residual).
+/// then removed from every residual). The residuals' squared norms are
+/// downdated (`|r − a w|² = |r|² − a²`), which only guides the choice of
+/// the next row; a row whose residual is below 1e-12 of the largest row's
+/// norm² gives no direction.
 fn tangent_basis(e: &[f64], d: usize, u: &mut [f64]) {
     u.fill(0.0);
     let mut res = e.to_vec();
-    let scale = e.chunks_exact(d).map(|r| dot(r, r)).fold(0.0f64, f64::max);
+    let mut norms: Vec<f64> = e.chunks_exact(d).map(|r| dot(r, r)).collect();
+    let scale = norms.iter().copied().fold(0.0f64, f64::max);
     for i in 0..TANGENT {
-        let (mut arg, mut big) = (usize::MAX, 1e-20 * scale);
-        for (r, row) in res.chunks_exact(d).enumerate() {
-            let n = dot(row, row);
+        let (mut arg, mut big) = (usize::MAX, 1e-12 * scale);
+        for (r, &n) in norms.iter().enumerate() {
             if n > big {
                 (arg, big) = (r, n);
             }
@@ -146,12 +150,22 @@ fn tangent_basis(e: &[f64], d: usize, u: &mut [f64]) {
             break;
         }
         w.iter_mut().for_each(|v| *v /= n);
-        for row in res.chunks_exact_mut(d) {
-            let a = dot(row, &w);
-            row.iter_mut().zip(&w).for_each(|(r, w)| *r -= a * w);
+        if i + 1 < TANGENT {
+            for (row, nr) in res.chunks_exact_mut(d).zip(norms.iter_mut()) {
+                let a = dot(row, &w);
+                row.iter_mut().zip(&w).for_each(|(r, w)| *r -= a * w);
+                *nr -= a * a;
+            }
         }
         u[i * d..(i + 1) * d].copy_from_slice(&w);
     }
+}
+
+/// `max(a, b)` for numbers that are not NaN (a compare and a select,
+/// which vectorize, where `f64::max` also handles NaN).
+#[inline(always)]
+fn max_finite(a: f64, b: f64) -> f64 {
+    if a > b { a } else { b }
 }
 
 #[inline(always)]
@@ -311,6 +325,7 @@ impl BallData {
             .map(|c| c.iter().map(|v| v * v).sum())
             .collect();
         let c_err = c_norm.iter().map(|&cn| score_err(d, 0.0, cn)).collect();
+        let c_len = c_norm.iter().map(|&cn| cn.sqrt()).collect();
         let centers32 = centers.iter().map(|&v| v as f32).collect();
         let tangent32 = tangent.iter().map(|&v| v as f32).collect();
         BallData {
@@ -320,6 +335,7 @@ impl BallData {
             pos_of,
             ranges,
             c_norm,
+            c_len,
             radii,
             to_center,
             ball_of,
@@ -610,6 +626,7 @@ crate::cpu::dispatched! {
         for i in 0..len {
             let q = &q_rows[(q0 + i) * d..(q0 + i + 1) * d];
             let (qn, mut best) = (work.qn[i], work.best[i]);
+            let q_norm = qn.sqrt();
             let g = &gb[i * m..(i + 1) * m];
             let tcol = &work.tq.col_as_slice(i)[..n_cand * TANGENT];
             work.visit.clear();
@@ -624,8 +641,10 @@ crate::cpu::dispatched! {
                     qc: work.q_err[i] + this.c_err[j],
                     uq: work.t_err[i],
                 };
-                let tb = tangent_bound(this, j, qn, f64::from(g[j]), &uq, err, sl);
-                if tb.lb2 <= best.0 {
+                if let Some(tb) =
+                    tangent_bound(this, j, (qn, q_norm), f64::from(g[j]), &uq, err, sl, best.0)
+                    && tb.lb2 <= best.0
+                {
                     work.visit.push((tb.lb2, j as u32, tb));
                 }
             }
@@ -640,20 +659,26 @@ crate::cpu::dispatched! {
                 let tol = tb.eps + sl * this.radii[j as usize];
                 // Each row's own bound, branch-free across the ball: its
                 // tangent bound and ||q − c| − |x − c||.
+                // (Slices of equal length and `max_finite`: the loop runs
+                // across rows in SIMD lanes.)
                 work.row_lb.clear();
                 work.row_lb.resize(l, 0.0);
+                let lb = &mut work.row_lb[..l];
                 let (e, rp) = (&this.to_center[start..start + l], &this.row_perp[start..start + l]);
+                let rt: [&[f64]; TANGENT] =
+                    std::array::from_fn(|t| &this.row_tan[t * nx + start..t * nx + start + l]);
+                let (up, down, keep) = (1.0 + sl, 1.0 - sl, 1.0 - 2.0 * sl);
+                let flat = 1.0 - this.eta;
                 for k in 0..l {
-                    let a = (tb.dc_lo - e[k] * (1.0 + sl)).max(e[k] * (1.0 - sl) - tb.dc_hi).max(0.0);
+                    let a = max_finite(max_finite(tb.dc_lo - e[k] * up, e[k] * down - tb.dc_hi), 0.0);
                     let mut gap2 = 0.0;
                     for t in 0..TANGENT {
-                        let at = this.row_tan[t * nx + start + k];
-                        let gt = ((tb.t[t] - at).abs() - tol).max(0.0);
+                        let gt = max_finite((tb.t[t] - rt[t][k]).abs() - tol, 0.0);
                         gap2 += gt * gt;
                     }
-                    let pb = (tb.perp - rp[k]).max(0.0);
-                    let lt = gap2 * (1.0 - this.eta) + pb * pb;
-                    work.row_lb[k] = (a * a).max(lt) * (1.0 - 2.0 * sl);
+                    let pb = max_finite(tb.perp - rp[k], 0.0);
+                    let lt = gap2 * flat + pb * pb;
+                    lb[k] = max_finite(a * a, lt) * keep;
                 }
                 for k in 0..l {
                     if work.row_lb[k] > best.0 {
@@ -686,22 +711,26 @@ crate::cpu::dispatched! {
 /// `|v|²` comes from `|q|² + |c|² − 2 q·c` (`qc` = q·c) and `t` from `Uq
 /// − Uc` (`uq` = Uq), each moved the safe way by the slack `sl` relative
 /// to the norms involved.
+///
+/// `None` when the box part alone, `|t − a|²(1 − η)`, already puts the
+/// ball beyond `cutoff` (the rest of the bound, which needs the square
+/// roots, is then not computed): the whole bound is at least that part,
+/// in floating point too (the same rounded terms, then a sum of
+/// non-negative terms, a max and the same factor: all monotone).
+/// `q_norm`: `|q|` (`√qn`).
+#[allow(clippy::too_many_arguments)]
 #[inline(always)]
 fn tangent_bound(
     this: &BallData,
     j: usize,
-    qn: f64,
+    (qn, q_norm): (f64, f64),
     qc: f64,
     uq: &[f64],
     err: Err32,
     sl: f64,
-) -> Tangent {
-    let s = qn + this.c_norm[j];
-    let v2_lo = (s - 2.0 * qc - sl * s - err.qc).max(0.0);
-    let v2_hi = (s - 2.0 * qc + sl * s + err.qc).max(0.0);
-    let dc_lo = v2_lo.sqrt() * (1.0 - sl);
-    let dc_hi = v2_hi.sqrt() * (1.0 + sl);
-    let eps = sl * (qn.sqrt() + this.c_norm[j].sqrt()) + err.uq + f64::MIN_POSITIVE;
+    cutoff: f64,
+) -> Option<Tangent> {
+    let eps = sl * (q_norm + this.c_len[j]) + err.uq + f64::MIN_POSITIVE;
     let (lo, hi) = (
         &this.box_lo[j * TANGENT..(j + 1) * TANGENT],
         &this.box_hi[j * TANGENT..(j + 1) * TANGENT],
@@ -716,19 +745,27 @@ fn tangent_bound(
         let g = ((lo[i] - ti).max(ti - hi[i]) - eps).max(0.0);
         gap2 += g * g;
     }
-    let tn = t2.sqrt() + 2.0 * eps;
     let eta = this.eta;
+    if gap2 * (1.0 - eta) * (1.0 - 2.0 * sl) > cutoff {
+        return None;
+    }
+    let s = qn + this.c_norm[j];
+    let v2_lo = (s - 2.0 * qc - sl * s - err.qc).max(0.0);
+    let v2_hi = (s - 2.0 * qc + sl * s + err.qc).max(0.0);
+    let dc_lo = v2_lo.sqrt() * (1.0 - sl);
+    let dc_hi = v2_hi.sqrt() * (1.0 + sl);
+    let tn = t2.sqrt() + 2.0 * eps;
     let perp = (v2_lo - tn * tn * (1.0 + 2.0 * eta)).max(0.0).sqrt() * (1.0 - sl);
     let pb = (perp - this.r_perp[j]).max(0.0);
     let plain = (dc_lo - this.radii[j]).max(0.0);
-    Tangent {
+    Some(Tangent {
         lb2: (gap2 * (1.0 - eta) + pb * pb).max(plain * plain) * (1.0 - 2.0 * sl),
         t,
         eps,
         perp,
         dc_lo,
         dc_hi,
-    }
+    })
 }
 
 /// Bounds on the errors of [`tangent_bound`]'s inputs computed in f32:

@@ -20,7 +20,7 @@ fn bound(b: &BallData, j: usize, qi: &[f64]) -> Tangent {
         qc: score_err(d, qn, 0.0) + b.c_err[j],
         uq: score_err(d, qn, 1.0 + b.eta),
     };
-    tangent_bound(b, j, qn, qc, &uq, err, slack(d))
+    tangent_bound(b, j, (qn, qn.sqrt()), qc, &uq, err, slack(d), f64::INFINITY).expect("no cutoff")
 }
 
 /// Every bound the search uses is below the distance it bounds: per

@@ -126,6 +126,7 @@ impl Partition {
         }
         let m = ranges.len();
         let mut near: Vec<u32> = Vec::new();
+        let mut rows32: Vec<f32> = Vec::new();
         for _ in 0..steps {
             let mut centers = vec![0.0; m * d];
             let mut count = vec![0usize; m];
@@ -146,7 +147,6 @@ impl Partition {
                 .chunks_exact(d)
                 .map(|c| c.iter().map(|v| v * v).sum())
                 .collect();
-            let cm = MatRef::from_row_major_slice(&centers, m, d);
             if m > LOCAL_FROM {
                 // Many clusters: each row considers only the clusters
                 // nearest its own (found once, from the first centres).
@@ -174,29 +174,38 @@ impl Partition {
                     });
                 continue;
             }
+            // The products in f32 (twice the SIMD width of f64): an
+            // assignment can only change between near-equidistant means,
+            // and any partition gives exact searches.
+            if rows32.is_empty() {
+                rows32 = rows.iter().map(|&v| v as f32).collect();
+            }
+            let c32: Vec<f32> = centers.iter().map(|&v| v as f32).collect();
+            let cm = MatRef::from_row_major_slice(&c32, m, d);
+            let rows32 = &rows32;
             labels
                 .par_chunks_mut(BLOCK)
                 .enumerate()
                 .for_each(|(b, out)| {
                     let r0 = b * BLOCK;
                     let xb = MatRef::from_row_major_slice(
-                        &rows[r0 * d..(r0 + out.len()) * d],
+                        &rows32[r0 * d..(r0 + out.len()) * d],
                         out.len(),
                         d,
                     );
-                    let mut g = Mat::<f64>::zeros(out.len(), m);
+                    let mut g = Mat::<f32>::zeros(m, out.len());
                     matmul(
                         g.as_mut(),
                         Accum::Replace,
-                        xb,
-                        cm.transpose(),
+                        cm,
+                        xb.transpose(),
                         1.0,
                         Par::Seq,
                     );
                     for (i, o) in out.iter_mut().enumerate() {
                         let mut best = (f64::INFINITY, *o);
-                        for j in 0..m {
-                            let s = c_norm[j] - 2.0 * g[(i, j)];
+                        for (j, &gj) in g.col_as_slice(i).iter().enumerate() {
+                            let s = c_norm[j] - 2.0 * f64::from(gj);
                             if s < best.0 {
                                 best = (s, j as u32);
                             }
