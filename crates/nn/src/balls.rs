@@ -47,7 +47,7 @@ use rayon::prelude::*;
 
 use crate::brute::score_err;
 pub use crate::partition::Partition;
-use crate::rows::{Rows, dist2, dist2_below};
+use crate::rows::{Rows, dist2, dist2_below, dot8 as dot};
 
 /// Rows per ball (about; k-means balls vary in size): the default size of
 /// a [`Partition`].
@@ -166,23 +166,6 @@ fn tangent_basis(e: &[f64], d: usize, u: &mut [f64]) {
 #[inline(always)]
 fn max_finite(a: f64, b: f64) -> f64 {
     if a > b { a } else { b }
-}
-
-#[inline(always)]
-fn dot(a: &[f64], b: &[f64]) -> f64 {
-    let mut l = [0.0f64; 8];
-    let n = a.len().min(b.len());
-    let (ac, bc) = (a[..n].chunks_exact(8), b[..n].chunks_exact(8));
-    let (ar, br) = (ac.remainder(), bc.remainder());
-    for (x, y) in ac.zip(bc) {
-        for j in 0..8 {
-            l[j] += x[j] * y[j];
-        }
-    }
-    for (j, (x, y)) in ar.iter().zip(br).enumerate() {
-        l[j] += x * y;
-    }
-    ((l[0] + l[4]) + (l[1] + l[5])) + ((l[2] + l[6]) + (l[3] + l[7]))
 }
 
 /// Relative slack of every bound: well above the f64 rounding of a

@@ -6,7 +6,7 @@ use nalgebra::DMatrix;
 use rayon::prelude::*;
 
 use crate::brute::score_err;
-use crate::rows::{dist2, row_major};
+use crate::rows::{dist2, dot8, row_major};
 
 /// Largest dimension [`NnStrategy::Auto`] uses the tree for.
 pub(crate) const TREE_MAX_DIM: usize = 48;
@@ -56,24 +56,6 @@ pub(crate) fn clusters(rows: &[f64], d: usize, leaf: usize) -> Clusters {
     }
 }
 
-/// `a · b` summed in eight lanes (a plain running sum of f64 is one
-/// dependent chain of additions; eight lanes vectorize).
-#[inline]
-fn lanes_dot(a: &[f64], b: &[f64]) -> f64 {
-    let mut l = [0.0f64; 8];
-    let (ac, bc) = (a.chunks_exact(8), b.chunks_exact(8));
-    let (ar, br) = (ac.remainder(), bc.remainder());
-    for (x, y) in ac.zip(bc) {
-        for j in 0..8 {
-            l[j] += x[j] * y[j];
-        }
-    }
-    for (j, (x, y)) in ar.iter().zip(br).enumerate() {
-        l[j] += x * y;
-    }
-    ((l[0] + l[4]) + (l[1] + l[5])) + ((l[2] + l[6]) + (l[3] + l[7]))
-}
-
 /// Splits `idx` (points `offset..offset + idx.len()` of the final order)
 /// at the median of the projections on the principal direction (two power
 /// iterations from the direction of the point farthest from the mean).
@@ -109,16 +91,16 @@ pub(crate) fn split(
                 .zip(row(i))
                 .zip(&mean)
                 .for_each(|((c, x), m)| *c = x - m);
-            let t = lanes_dot(&centred, &v);
+            let t = dot8(&centred, &v);
             w.iter_mut().zip(&centred).for_each(|(w, c)| *w += t * c);
         }
-        let norm = lanes_dot(&w, &w).sqrt();
+        let norm = dot8(&w, &w).sqrt();
         if norm == 0.0 {
             break;
         }
         v = w.into_iter().map(|x| x / norm).collect();
     }
-    let mut keyed: Vec<(f64, usize)> = idx.iter().map(|&i| (lanes_dot(row(i), &v), i)).collect();
+    let mut keyed: Vec<(f64, usize)> = idx.iter().map(|&i| (dot8(row(i), &v), i)).collect();
     let mid = n / 2;
     keyed.select_nth_unstable_by(mid, |a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
     for (slot, (_, i)) in idx.iter_mut().zip(keyed) {
