@@ -37,17 +37,22 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let total = t0.elapsed().as_secs_f64();
         let s = &b.report;
         println!(
-            "run {run}: factor {:.3} iterate {:.3} total {:.3} s, {} restarts, {} applications, ortho {:.1e}",
+            "run {run}: factor {:.3} iterate {:.3} total {:.3} s, {} restarts, {} applications, ortho {:.1e}, max residual {:.1e}, λ_k {:.6e}",
             s.factorization_seconds,
             s.iteration_seconds,
             total,
             s.restarts,
             s.operator_applications,
-            b.report.orthonormality_error
+            b.report.orthonormality_error,
+            s.max_residual(),
+            b.eigenvalues[k - 1]
         );
         if run > 0 {
             totals.push(total);
         }
+    }
+    if totals.is_empty() {
+        return Ok(());
     }
     totals.sort_by(f64::total_cmp);
     println!(

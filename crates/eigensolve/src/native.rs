@@ -220,6 +220,11 @@ fn krylov_schur(
     let mut restarts = 0;
     let mut applies = 0;
     let mut last_r = Mat::<f64>::zeros(b, b);
+    // Columns 0..locked of V are converged Ritz vectors taken out of the
+    // projected problem (see the restart); locked_theta their values.
+    let mut locked = 0;
+    let mut locked_theta: Vec<f64> = Vec::with_capacity(k);
+    let mut lock_spent = 0.0; // Σ‖s_i‖² of the locked pairs' dropped couplings
     loop {
         // Expand the basis block by block up to m columns.
         while c < m {
@@ -273,23 +278,29 @@ fn krylov_schur(
             c = cb;
         }
 
-        // Ritz pairs of the projected matrix, θ descending.
+        // Ritz pairs of the active part of the projected matrix (columns
+        // locked..m), θ descending.
         // One thread, explicitly: faer's default (its global parallelism)
         // splits the tridiagonalization by the pool's size, and the basis
         // then differs in the last digits between thread counts.
-        let (mut u, mut s) = (Mat::<f64>::zeros(m, m), faer::diag::Diag::<f64>::zeros(m));
+        let ma = m - locked;
+        let ka = k - locked;
+        let (mut u, mut s) = (
+            Mat::<f64>::zeros(ma, ma),
+            faer::diag::Diag::<f64>::zeros(ma),
+        );
         {
             use faer::dyn_stack::{MemBuffer, MemStack};
             use faer::linalg::evd;
             let seq = faer::Par::Seq;
             let mut mem = MemBuffer::new(evd::self_adjoint_evd_scratch::<f64>(
-                m,
+                ma,
                 evd::ComputeEigenvectors::Yes,
                 seq,
                 Default::default(),
             ));
             evd::self_adjoint_evd(
-                h.as_ref().submatrix(0, 0, m, m),
+                h.as_ref().submatrix(locked, locked, ma, ma),
                 s.as_mut(),
                 Some(u.as_mut()),
                 seq,
@@ -302,9 +313,9 @@ fn krylov_schur(
             })?;
         }
         let (s, u) = (s.column_vector(), u.as_ref());
-        let order: Vec<usize> = (0..m).rev().collect();
+        let order: Vec<usize> = (0..ma).rev().collect();
         let theta: Vec<f64> = order.iter().map(|&i| s[i]).collect();
-        // Residual of Ritz pair i: ‖R · y_i[m−b..m]‖.
+        // Residual of Ritz pair i: ‖R · y_i[ma−b..ma]‖.
         let resid: Vec<f64> = order
             .iter()
             .map(|&i| {
@@ -312,65 +323,126 @@ fn krylov_schur(
                 for a in 0..b {
                     let mut x = 0.0;
                     for t in 0..b {
-                        x += last_r[(a, t)] * u[(m - b + t, i)];
+                        x += last_r[(a, t)] * u[(ma - b + t, i)];
                     }
                     acc += x * x;
                 }
                 acc.sqrt()
             })
             .collect();
-        let converged = (0..k)
+        let converged = (0..ka)
             .filter(|&i| resid[i] <= p.tol * theta[i].abs())
             .count();
-        if converged == k || restarts >= p.max_restarts {
-            if converged < k {
+        if converged == ka || restarts >= p.max_restarts {
+            if converged < ka {
                 return Err(Error::NoConvergence {
-                    converged,
+                    converged: locked + converged,
                     wanted: k,
                     restarts,
                     operator_applications: applies,
                 });
             }
-            let y = gather_columns(u, &order[..k]);
+            let y = gather_columns(u, &order[..ka]);
             let mut psi = vec![0.0; n * k];
+            psi[..locked * n].copy_from_slice(&v[..locked * n]);
             basis_times(
-                &v[..m * n],
+                &v[locked * n..m * n],
                 n,
                 y.as_ref(),
-                MatMut::from_column_major_slice_mut(&mut psi, n, k),
+                MatMut::from_column_major_slice_mut(&mut psi[locked * n..], n, ka),
                 par,
             );
-            return Ok((theta[..k].to_vec(), psi, restarts, applies));
+            let mut all_theta = locked_theta;
+            all_theta.extend_from_slice(&theta[..ka]);
+            return Ok(sort_descending(all_theta, psi, n, restarts, applies));
         }
 
-        // Thick restart: keep the leading keep Ritz vectors and the residual
-        // block; m − keep must be a positive multiple of b.
+        // Lock (deflate) converged active Ritz pairs: they leave the
+        // projected problem, the restarts and the final basis product (only
+        // the Gram–Schmidt passes still see them). A locked pair's coupling
+        // s_i to the residual block is dropped from H; since A is
+        // symmetric, that changes the residual of any later Ritz pair (and
+        // of a pair locked later) by at most ‖[s_1 … s_L]‖_F. Pairs are
+        // locked, smallest coupling first, while Σ‖s_i‖² stays within
+        // (tol · θ_k)², θ_k the smallest wanted Ritz value: every wanted
+        // pair then keeps its residual within √2 · tol · θ.
+        let budget = (p.tol * theta[ka - 1].abs()).powi(2);
+        let mut candidates: Vec<usize> = (0..ka)
+            .filter(|&i| resid[i] <= p.tol * theta[i].abs())
+            .collect();
+        candidates.sort_by(|&x, &y| resid[x].total_cmp(&resid[y]));
+        let mut is_new_lock = vec![false; ka];
+        for &i in &candidates {
+            let r2 = resid[i] * resid[i];
+            if lock_spent + r2 > budget {
+                break;
+            }
+            lock_spent += r2;
+            is_new_lock[i] = true;
+        }
+        // The new locks first (θ descending), then the other active
+        // pairs in θ order.
+        let sel: Vec<usize> = (0..ka)
+            .filter(|&i| is_new_lock[i])
+            .chain((0..ma).filter(|&i| i >= ka || !is_new_lock[i]))
+            .collect();
+        let new_locks = ka - sel[..ka].iter().filter(|&&i| !is_new_lock[i]).count();
+
+        // Thick restart: keep the leading keep Ritz vectors (locked
+        // included) and the residual block; m − keep must be a positive
+        // multiple of b.
         let target = k + (m - k) / 2;
         let keep = m - ((m - target) / b).max(1) * b;
         debug_assert!(keep >= k && (m - keep).is_multiple_of(b));
-        let y = gather_columns(u, &order[..keep]);
-        restart_in_place(&mut v, n, m, y.as_ref(), par);
+        let kept: Vec<usize> = sel[..keep - locked].iter().map(|&i| order[i]).collect();
+        let y = gather_columns(u, &kept);
+        restart_in_place(&mut v[locked * n..], n, ma, y.as_ref(), par);
         v.copy_within(m * n..(m + b) * n, keep * n);
         h.fill(0.0);
-        for i in 0..keep {
-            h[(i, i)] = theta[i];
+        for i in locked..keep {
+            h[(i, i)] = theta[sel[i - locked]];
         }
-        // Coupling of the residual block to the kept Ritz vectors:
-        // S = R · Y[m−b..m, 0..keep].
+        // Coupling of the residual block to the kept active Ritz vectors:
+        // S = R · Y[ma−b..ma, ..].
         for a in 0..b {
-            for i in 0..keep {
+            for i in locked..keep {
                 let mut x = 0.0;
                 for t in 0..b {
-                    x += last_r[(a, t)] * y[(m - b + t, i)];
+                    x += last_r[(a, t)] * y[(ma - b + t, i - locked)];
                 }
                 h[(keep + a, i)] = x;
                 h[(i, keep + a)] = x;
             }
         }
+        locked_theta.extend(sel[..new_locks].iter().map(|&i| theta[i]));
+        locked += new_locks;
         c = keep;
         block_start = keep;
         restarts += 1;
     }
+}
+
+/// The locked and active Ritz pairs in one θ-descending order (a pair
+/// found after others were locked may exceed them).
+fn sort_descending(
+    theta: Vec<f64>,
+    psi: Vec<f64>,
+    n: usize,
+    restarts: usize,
+    applies: usize,
+) -> (Vec<f64>, Vec<f64>, usize, usize) {
+    let k = theta.len();
+    let mut idx: Vec<usize> = (0..k).collect();
+    idx.sort_by(|&a, &b| theta[b].total_cmp(&theta[a]));
+    if idx.iter().enumerate().all(|(i, &j)| i == j) {
+        return (theta, psi, restarts, applies);
+    }
+    let mut out = vec![0.0; n * k];
+    for (dst, &src) in idx.iter().enumerate() {
+        out[dst * n..(dst + 1) * n].copy_from_slice(&psi[src * n..(src + 1) * n]);
+    }
+    let sorted = idx.iter().map(|&i| theta[i]).collect();
+    (sorted, out, restarts, applies)
 }
 
 /// Rows of `V · Y` (V: the n x m column-major `v`, Y: m x cols) into `out`
