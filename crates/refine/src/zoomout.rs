@@ -9,6 +9,7 @@ use crate::{Error, Iteration, RefineReport, Refined, Refiner, Result, check_k, c
 use fmaps_nn::NnParams;
 use fmaps_solve::convert::{
     BasisRows, Conversion, gram, point_map, point_map_sinkhorn, pullback, pullback_unweighted,
+    pullback_update,
 };
 use fmaps_solve::sinkhorn::Sinkhorn;
 
@@ -179,6 +180,27 @@ impl Side {
     }
 }
 
+/// [`fit`] of `t`, from the fit `c` of the previous map `t_prev` (a
+/// smaller or equal size) where that is cheaper: on all vertices, only the
+/// rows whose image changed and the new rows and columns are summed
+/// ([`pullback_update`]). On samples the fit is a least-squares solve and
+/// is computed directly.
+fn fit_after(
+    previous: Option<(&DMatrix<f64>, &[usize])>,
+    t: &[usize],
+    other: &Side,
+    k_other: usize,
+    this: &Side,
+    k_this: usize,
+) -> Result<DMatrix<f64>> {
+    match (&this.fit, previous) {
+        (Fit::Mass(m), Some((c, t_prev))) => Ok(pullback_update(
+            c, t_prev, t, &other.phi, k_other, &this.phi, k_this, m,
+        )?),
+        _ => fit(t, other, k_other, this, k_this),
+    }
+}
+
 /// The map `this ← other` of size k_this x k_other induced by `t` (one
 /// row of `other` per row of `this`).
 fn fit(
@@ -317,17 +339,34 @@ impl ZoomOut {
             .filter(|g| sub.is_none() && g.len() == basis_b.n())
             .map(<[usize]>::to_vec);
         let mut prev_ab: Option<Vec<usize>> = None;
+        // Each direction's last fit, of the maps prev / prev_ab.
+        let (mut fit_ab, mut fit_ba): (Option<DMatrix<f64>>, Option<DMatrix<f64>>) = (None, None);
         let mut iterations = Vec::new();
         for k in self.schedule() {
             let ti = Instant::now();
             let t_ba = nn(&c, &side_a.phi, &side_b.phi, prev.as_deref())?;
-            let mut next = fit(&t_ba, &side_a, k, &side_b, k)?;
+            // The previous iteration's fit and map (not the caller's guess).
+            let before = fit_ab
+                .as_ref()
+                .zip(prev.as_deref())
+                .filter(|_| !iterations.is_empty());
+            let c_ab_fit = fit_after(before, &t_ba, &side_a, k, &side_b, k)?;
+            let mut next = c_ab_fit.clone();
+            fit_ab = Some(c_ab_fit);
             if self.bijective {
                 let ct = c.transpose();
                 let t_ab = nn(&ct, &side_b.phi, &side_a.phi, prev_ab.as_deref())?;
-                let c_ba = fit(&t_ab, &side_b, k, &side_a, k)?;
+                let c_ba = fit_after(
+                    fit_ba.as_ref().zip(prev_ab.as_deref()),
+                    &t_ab,
+                    &side_b,
+                    k,
+                    &side_a,
+                    k,
+                )?;
                 prev_ab = Some(t_ab);
                 next = (next + c_ba.transpose()) * 0.5;
+                fit_ba = Some(c_ba);
             }
             c = next;
             iterations.push(Iteration {

@@ -296,6 +296,94 @@ pub fn pullback(
     ))
 }
 
+/// [`pullback`] of `t_ba` computed from `c_prev`, the pull-back of another
+/// point map `t_prev` on the same rows and mass at a size
+/// `kb_p x ka_p <= kb x ka`: only the rows of B whose image changed
+/// (`t_ba[y] ≠ t_prev[y]`) and the new rows and columns are summed. This is
+/// what ZoomOut needs at each step (the map changes at a fraction of the
+/// vertices, the size grows by a few columns); the result equals
+/// [`pullback`] up to the rounding of a different summation order. When
+/// most rows changed it computes [`pullback`] directly.
+///
+/// Errors: those of [`pullback`]; `t_prev` of another length or out of
+/// range; `c_prev` larger than `kb x ka`.
+#[allow(clippy::too_many_arguments)]
+pub fn pullback_update(
+    c_prev: &DMatrix<f64>,
+    t_prev: &[usize],
+    t_ba: &[usize],
+    phi_a: &BasisRows,
+    ka: usize,
+    phi_b: &BasisRows,
+    kb: usize,
+    mass_b: &[f64],
+) -> Result<DMatrix<f64>> {
+    check_map(t_prev, phi_a, phi_b)?;
+    let (kbp, kap) = c_prev.shape();
+    if kbp > kb || kap > ka {
+        return Err(Error::InvalidParameter(format!(
+            "the previous pull-back ({kbp} x {kap}) is larger than the new one ({kb} x {ka})"
+        )));
+    }
+    let n = t_ba.len();
+    let changed: Vec<usize> = (0..n.min(t_prev.len()))
+        .filter(|&y| t_ba[y] != t_prev[y])
+        .collect();
+    // Products of the update (changed rows of the old block, new rows and
+    // new columns) against the full product; the direct one when cheaper.
+    let update = changed.len() * kbp * kap + n * (kb * ka - kbp * kap);
+    if update >= n * kb * ka {
+        return pullback(t_ba, phi_a, ka, phi_b, kb, mass_b);
+    }
+    check_map(t_ba, phi_a, phi_b)?;
+    check_cols("k_A vs eigenvectors of A", ka, phi_a)?;
+    check_cols("k_B vs eigenvectors of B", kb, phi_b)?;
+    if mass_b.len() != phi_b.n() {
+        return Err(Error::SizeMismatch {
+            what: "mass of B vs rows of B",
+            found: mass_b.len(),
+            expected: phi_b.n(),
+        });
+    }
+    let mut c = DMatrix::zeros(kb, ka);
+    c.view_mut((0, 0), (kbp, kap)).copy_from(c_prev);
+    if !changed.is_empty() && kbp > 0 && kap > 0 {
+        // Σ over changed y of m_y Φ_B(y)ᵀ (Φ_A(t(y)) − Φ_A(t_prev(y))).
+        let nc = changed.len();
+        let mut d = vec![0.0; nc * kap];
+        let mut rows_b = vec![0.0; nc * kbp];
+        for (r, &y) in changed.iter().enumerate() {
+            let (new, old) = (phi_a.row(t_ba[y], kap), phi_a.row(t_prev[y], kap));
+            for ((x, &p), &q) in d[r * kap..(r + 1) * kap].iter_mut().zip(new).zip(old) {
+                *x = mass_b[y] * (p - q);
+            }
+            rows_b[r * kbp..(r + 1) * kbp].copy_from_slice(phi_b.row(y, kbp));
+        }
+        let delta = inner(
+            MatRef::from_row_major_slice(&rows_b, nc, kbp),
+            MatRef::from_row_major_slice(&d, nc, kap),
+        );
+        let mut old = c.view_mut((0, 0), (kbp, kap));
+        old += delta;
+    }
+    if ka > kap || kb > kbp {
+        let w = gathered(t_ba, phi_a, ka, Some(mass_b));
+        let w = MatRef::from_row_major_slice(&w, n, ka);
+        let b = phi_b.view(kb);
+        if ka > kap {
+            // New columns, every row.
+            let cols = inner(b, w.subcols(kap, ka - kap));
+            c.view_mut((0, kap), (kb, ka - kap)).copy_from(&cols);
+        }
+        if kb > kbp && kap > 0 {
+            // New rows, the old columns.
+            let rows = inner(b.subcols(kbp, kb - kbp), w.subcols(0, kap));
+            c.view_mut((kbp, 0), (kb - kbp, kap)).copy_from(&rows);
+        }
+    }
+    Ok(c)
+}
+
 /// `Φ_B[:, :kb]ᵀ Π_BA Φ_A[:, :ka]` without the mass: the right-hand side
 /// of the least-squares fit of a map on samples (with [`gram`] of B).
 ///

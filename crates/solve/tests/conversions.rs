@@ -165,3 +165,61 @@ fn pullback_equals_the_dense_formula_and_checks_its_input() {
         Err(Error::IndexOutOfRange { at: 1, .. })
     ));
 }
+
+/// The incremental pull-back (ZoomOut's fit: a map that changed at some
+/// rows, a size grown by some columns) equals the direct one for every
+/// mix: few or all rows changed, grown rows and/or columns, an empty start;
+/// and its extra inputs are checked.
+#[test]
+fn pullback_update_equals_the_direct_pullback() {
+    use fmaps_solve::convert::{pullback, pullback_update};
+    let b = basis(&bumpy(), 16);
+    let n = b.n();
+    let m = b.mass.as_slice();
+    let ra = BasisRows::new(&b, 16);
+    let rb = BasisRows::new(&b, 14);
+    let t_prev: Vec<usize> = (0..n).map(|y| (y * 5 + 2) % n).collect();
+    for (every, (kbp, kap), (kb, ka)) in [
+        (3, (10, 8), (14, 12)),
+        (3, (10, 8), (10, 8)),
+        (7, (10, 8), (14, 8)),
+        (7, (10, 8), (10, 16)),
+        (1, (10, 8), (14, 12)),
+        (1000, (0, 0), (6, 9)),
+        (1000, (5, 5), (5, 5)),
+    ] {
+        let t: Vec<usize> = (0..n)
+            .map(|y| {
+                if y % every == 0 {
+                    (y * 11 + 1) % n
+                } else {
+                    t_prev[y]
+                }
+            })
+            .collect();
+        let c_prev = pullback(&t_prev, &ra, kap, &rb, kbp, m).unwrap();
+        let got = pullback_update(&c_prev, &t_prev, &t, &ra, ka, &rb, kb, m).unwrap();
+        let want = pullback(&t, &ra, ka, &rb, kb, m).unwrap();
+        assert_eq!(got.shape(), (kb, ka));
+        let err = (&got - &want).amax();
+        assert!(
+            err < 1e-13,
+            "every {every}, {kbp}x{kap} -> {kb}x{ka}: {err}"
+        );
+    }
+    let c_prev = pullback(&t_prev, &ra, 8, &rb, 10, m).unwrap();
+    assert!(matches!(
+        pullback_update(&c_prev, &t_prev, &t_prev, &ra, 7, &rb, 10, m),
+        Err(Error::InvalidParameter(_))
+    ));
+    assert!(matches!(
+        pullback_update(&c_prev, &t_prev[1..], &t_prev, &ra, 8, &rb, 10, m),
+        Err(Error::SizeMismatch { .. })
+    ));
+    let mut bad = t_prev.clone();
+    bad[3] = n;
+    assert!(matches!(
+        pullback_update(&c_prev, &t_prev, &bad, &ra, 8, &rb, 10, m),
+        Err(Error::IndexOutOfRange { at: 3, .. })
+    ));
+}
