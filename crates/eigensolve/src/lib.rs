@@ -10,7 +10,8 @@
 //! - [`NativeSolver`] (default, pure Rust): shift-invert with a small
 //!   negative shift σ, a sparse Cholesky factorization of `L − σM` (faer,
 //!   AMD ordering), and a block Krylov–Schur iteration (thick-restarted block
-//!   Lanczos with full reorthogonalization on BLAS-3 kernels).
+//!   Lanczos with full reorthogonalization on BLAS-3 kernels, converged
+//!   Ritz pairs locked at each restart).
 //! - `ArpackSolver` (cargo feature `arpack`): ARPACK's implicitly restarted
 //!   Lanczos (`dsaupd`/`dseupd`, mode 3) on the same factorization.
 //! - [`DenseSolver`]: a dense symmetric eigendecomposition, a reference for

@@ -11,7 +11,11 @@
 //! compressed to the leading Ritz vectors plus the residual block
 //! (the Krylov–Schur restart of G. W. Stewart, SIAM J. Matrix Anal. Appl.
 //! 23(3), 2001; for the symmetric case it is the thick-restart Lanczos of
-//! K. Wu and H. Simon, SIAM J. Matrix Anal. Appl. 22(2), 2000). The block
+//! K. Wu and H. Simon, SIAM J. Matrix Anal. Appl. 22(2), 2000). At each
+//! restart, converged Ritz pairs are locked (deflated, which the
+//! Krylov–Schur form makes simple, as Stewart notes): they leave the projected
+//! problem, so the dense eigendecompositions, the restarts and the final
+//! basis product only involve the unlocked part. The block
 //! size lets the sparse solves and the reorthogonalization run as BLAS-3
 //! kernels and makes clusters of close eigenvalues converge together.
 
