@@ -84,6 +84,58 @@ fn min_subspace_cosine(a: &SpectralBasis, b: &SpectralBasis) -> f64 {
     g.singular_values().min()
 }
 
+/// The first `groups` eigenvalue groups of a sphere of radius `r`: group l
+/// holds 2l + 1 eigenvalues within `tol` (relative) of l(l + 1)/r², spread
+/// by less than `spread` (relative), each group above the previous one.
+fn check_sphere_groups(
+    name: &str,
+    b: &SpectralBasis,
+    r: f64,
+    groups: usize,
+    tol: f64,
+    spread: f64,
+) {
+    let mut i = 0;
+    let mut prev_max = f64::NEG_INFINITY;
+    for l in 0..groups {
+        let exact = (l * (l + 1)) as f64 / (r * r);
+        let group = &b.eigenvalues.as_slice()[i..i + 2 * l + 1];
+        for &lam in group {
+            assert!(
+                (lam - exact).abs() <= tol * exact + 1e-9,
+                "{name}: λ = {lam}, l = {l}: {exact}"
+            );
+        }
+        let lo = group.iter().copied().fold(f64::INFINITY, f64::min);
+        let hi = group.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        assert!(lo > prev_max, "{name}: group l={l} overlaps the previous");
+        assert!(
+            hi - lo < spread * exact + 1e-9,
+            "{name}: group l={l} spread {}",
+            hi - lo
+        );
+        prev_max = hi;
+        i += 2 * l + 1;
+    }
+}
+
+/// Two bases of the same k pairs: eigenvalues within `tol` (relative,
+/// absolute below 1) and the same span (principal cosines above 1 − tol).
+fn assert_same_pairs(name: &str, a: &SpectralBasis, b: &SpectralBasis, tol: f64) {
+    for i in 0..a.k() {
+        let (x, y) = (a.eigenvalues[i], b.eigenvalues[i]);
+        assert!(
+            (x - y).abs() <= tol * y.abs().max(1.0),
+            "{name}: λ_{i} {x} vs {y}"
+        );
+    }
+    let cos = min_subspace_cosine(a, b);
+    assert!(
+        cos > 1.0 - tol,
+        "{name}: subspaces differ, min cosine {cos}"
+    );
+}
+
 #[test]
 fn sphere_spectrum_groups_as_l_l_plus_1() {
     let r = 2.0;
@@ -93,36 +145,9 @@ fn sphere_spectrum_groups_as_l_l_plus_1() {
     for s in backends() {
         let b = solve(s.as_ref(), &o, k);
         check_contract(s.name(), &b);
-        let mut i = 0;
-        let mut prev_max = f64::NEG_INFINITY;
-        for l in 0..5usize {
-            let exact = (l * (l + 1)) as f64 / (r * r);
-            let group = &b.eigenvalues.as_slice()[i..i + 2 * l + 1];
-            for &lam in group {
-                // The cotan discretization error grows like (l h)²; at 642
-                // vertices it is 2.6% for l = 4 (dense reference agrees).
-                assert!(
-                    (lam - exact).abs() <= 0.03 * exact + 1e-9,
-                    "{}: λ = {lam}, l = {l}: {exact}",
-                    s.name()
-                );
-            }
-            // Multiplicity 2l+1: the whole group lies above the previous one.
-            let (lo, hi) = group
-                .iter()
-                .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, c), &x| {
-                    (a.min(x), c.max(x))
-                });
-            assert!(lo > prev_max, "{}: group l={l} overlaps", s.name());
-            assert!(
-                hi - lo < 0.05 * exact + 1e-9,
-                "{}: group l={l} spread {}",
-                s.name(),
-                hi - lo
-            );
-            prev_max = hi;
-            i += 2 * l + 1;
-        }
+        // The cotan discretization error grows like (l h)²; at 642
+        // vertices it is 2.6% for l = 4 (dense reference agrees).
+        check_sphere_groups(s.name(), &b, r, 5, 0.03, 0.05);
     }
 }
 
@@ -147,19 +172,7 @@ fn backends_agree_with_the_dense_reference() {
             let name = format!("{} on {mname}", s.name());
             let b = solve(s.as_ref(), &o, k);
             check_contract(&name, &b);
-            let ref_k = reference.truncate(k);
-            for i in 0..k {
-                let (x, y) = (b.eigenvalues[i], ref_k.eigenvalues[i]);
-                assert!(
-                    (x - y).abs() <= 1e-8 * y.abs().max(1.0),
-                    "{name}: λ_{i} {x} vs {y}"
-                );
-            }
-            let cos = min_subspace_cosine(&b, &ref_k);
-            assert!(
-                cos > 1.0 - 1e-8,
-                "{name}: subspaces differ, min cosine {cos}"
-            );
+            assert_same_pairs(&name, &b, &reference.truncate(k), 1e-8);
         }
     }
 }
@@ -362,32 +375,9 @@ fn locking_keeps_every_copy_and_the_accuracy() {
             "{name}: residual {} (λ_k {lam_k})",
             b.report.max_residual()
         );
-        let mut i = 0;
-        let mut prev_max = f64::NEG_INFINITY;
-        for l in 0..10usize {
-            let exact = (l * (l + 1)) as f64 / (r * r);
-            let group = &b.eigenvalues.as_slice()[i..i + 2 * l + 1];
-            let lo = group.iter().copied().fold(f64::INFINITY, f64::min);
-            let hi = group.iter().copied().fold(f64::NEG_INFINITY, f64::max);
-            assert!(lo > prev_max, "{name}: group l={l} overlaps the previous");
-            assert!(
-                (lo - exact).abs() <= 0.05 * exact + 1e-9
-                    && (hi - exact).abs() <= 0.05 * exact + 1e-9,
-                "{name}: group l={l} spans {lo}..{hi}, exact {exact}"
-            );
-            prev_max = hi;
-            i += 2 * l + 1;
-        }
+        check_sphere_groups(name, b, r, 10, 0.05, 0.1);
     }
-    for i in 0..k {
-        let (x, y) = (default.eigenvalues[i], tight.eigenvalues[i]);
-        assert!(
-            (x - y).abs() <= 1e-10 * y.abs().max(1.0),
-            "λ_{i}: {x} vs {y}"
-        );
-    }
-    let cos = min_subspace_cosine(&default, &tight);
-    assert!(cos > 1.0 - 1e-10, "spans differ: min cosine {cos}");
+    assert_same_pairs("default vs tight", &default, &tight, 1e-10);
 }
 
 #[test]

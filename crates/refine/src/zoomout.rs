@@ -180,12 +180,13 @@ impl Side {
     }
 }
 
-/// [`fit`] of `t`, from the fit `c` of the previous map `t_prev` (a
-/// smaller or equal size) where that is cheaper: on all vertices, only the
-/// rows whose image changed and the new rows and columns are summed
-/// ([`pullback_update`]). On samples the fit is a least-squares solve and
-/// is computed directly.
-fn fit_after(
+/// The map `this ← other` of size k_this x k_other induced by `t` (one
+/// row of `other` per row of `this`). With `previous`, the fit `c` of an
+/// earlier map `t_prev` (a smaller or equal size): on all vertices, only
+/// the rows whose image changed and the new rows and columns are summed
+/// ([`pullback_update`]); on samples the fit is a least-squares solve,
+/// computed directly.
+fn fit(
     previous: Option<(&DMatrix<f64>, &[usize])>,
     t: &[usize],
     other: &Side,
@@ -193,25 +194,13 @@ fn fit_after(
     this: &Side,
     k_this: usize,
 ) -> Result<DMatrix<f64>> {
-    match (&this.fit, previous) {
-        (Fit::Mass(m), Some((c, t_prev))) => Ok(pullback_update(
-            c, t_prev, t, &other.phi, k_other, &this.phi, k_this, m,
-        )?),
-        _ => fit(t, other, k_other, this, k_this),
-    }
-}
-
-/// The map `this ← other` of size k_this x k_other induced by `t` (one
-/// row of `other` per row of `this`).
-fn fit(
-    t: &[usize],
-    other: &Side,
-    k_other: usize,
-    this: &Side,
-    k_this: usize,
-) -> Result<DMatrix<f64>> {
     match &this.fit {
-        Fit::Mass(m) => Ok(pullback(t, &other.phi, k_other, &this.phi, k_this, m)?),
+        Fit::Mass(m) => Ok(match previous {
+            Some((c, t_prev)) => {
+                pullback_update(c, t_prev, t, &other.phi, k_other, &this.phi, k_this, m)?
+            }
+            None => pullback(t, &other.phi, k_other, &this.phi, k_this, m)?,
+        }),
         Fit::Gram(g) => {
             let rhs = pullback_unweighted(t, &other.phi, k_other, &this.phi, k_this)?;
             let chol = g
@@ -350,13 +339,13 @@ impl ZoomOut {
                 .as_ref()
                 .zip(prev.as_deref())
                 .filter(|_| !iterations.is_empty());
-            let c_ab_fit = fit_after(before, &t_ba, &side_a, k, &side_b, k)?;
+            let c_ab_fit = fit(before, &t_ba, &side_a, k, &side_b, k)?;
             let mut next = c_ab_fit.clone();
             fit_ab = Some(c_ab_fit);
             if self.bijective {
                 let ct = c.transpose();
                 let t_ab = nn(&ct, &side_b.phi, &side_a.phi, prev_ab.as_deref())?;
-                let c_ba = fit_after(
+                let c_ba = fit(
                     fit_ba.as_ref().zip(prev_ab.as_deref()),
                     &t_ab,
                     &side_b,

@@ -266,6 +266,28 @@ fn gathered(t_ba: &[usize], phi_a: &BasisRows, ka: usize, w: Option<&[f64]>) -> 
     out
 }
 
+/// The checks of [`pullback`]'s input.
+fn check_pullback(
+    t_ba: &[usize],
+    phi_a: &BasisRows,
+    ka: usize,
+    phi_b: &BasisRows,
+    kb: usize,
+    mass_b: &[f64],
+) -> Result<()> {
+    check_map(t_ba, phi_a, phi_b)?;
+    check_cols("k_A vs eigenvectors of A", ka, phi_a)?;
+    check_cols("k_B vs eigenvectors of B", kb, phi_b)?;
+    if mass_b.len() != phi_b.n() {
+        return Err(Error::SizeMismatch {
+            what: "mass of B vs rows of B",
+            found: mass_b.len(),
+            expected: phi_b.n(),
+        });
+    }
+    Ok(())
+}
+
 /// `C_AB = Φ_Bᵀ M_B Π_BA Φ_A` on the first `ka`/`kb` columns (k_B x k_A):
 /// the functional map of the point map `t_ba` (one row of `phi_a` per row
 /// of `phi_b`), `mass_b` the mass of B's rows.
@@ -279,16 +301,7 @@ pub fn pullback(
     kb: usize,
     mass_b: &[f64],
 ) -> Result<DMatrix<f64>> {
-    check_map(t_ba, phi_a, phi_b)?;
-    check_cols("k_A vs eigenvectors of A", ka, phi_a)?;
-    check_cols("k_B vs eigenvectors of B", kb, phi_b)?;
-    if mass_b.len() != phi_b.n() {
-        return Err(Error::SizeMismatch {
-            what: "mass of B vs rows of B",
-            found: mass_b.len(),
-            expected: phi_b.n(),
-        });
-    }
+    check_pullback(t_ba, phi_a, ka, phi_b, kb, mass_b)?;
     let w = gathered(t_ba, phi_a, ka, Some(mass_b));
     Ok(inner(
         phi_b.view(kb),
@@ -335,16 +348,7 @@ pub fn pullback_update(
     if update >= n * kb * ka {
         return pullback(t_ba, phi_a, ka, phi_b, kb, mass_b);
     }
-    check_map(t_ba, phi_a, phi_b)?;
-    check_cols("k_A vs eigenvectors of A", ka, phi_a)?;
-    check_cols("k_B vs eigenvectors of B", kb, phi_b)?;
-    if mass_b.len() != phi_b.n() {
-        return Err(Error::SizeMismatch {
-            what: "mass of B vs rows of B",
-            found: mass_b.len(),
-            expected: phi_b.n(),
-        });
-    }
+    check_pullback(t_ba, phi_a, ka, phi_b, kb, mass_b)?;
     let mut c = DMatrix::zeros(kb, ka);
     c.view_mut((0, 0), (kbp, kap)).copy_from(c_prev);
     if !changed.is_empty() && kbp > 0 && kap > 0 {
