@@ -116,7 +116,9 @@ pub fn fmap_from_point_map(
 
 /// `T_BA(y) = argmin_x ‖C_AB Φ_A(x)ᵀ − Φ_B(y)ᵀ‖`: the point map B → A of a
 /// functional map A → B (uses the first k_A and k_B eigenvectors, as `c_ab`
-/// is sized).
+/// is sized). Exact nearest neighbours; above [`BALLS_FROM_ROWS`] vertices
+/// of A (and without matrix tiles) they are searched in k-means clusters of
+/// A's rows, built for this one search.
 pub fn point_map_from_fmap(
     c_ab: &DMatrix<f64>,
     basis_a: &SpectralBasis,
@@ -144,15 +146,34 @@ fn convert_once(
     conversion: Conversion,
 ) -> Result<Vec<usize>> {
     let (kb, ka) = check_fmap(c_ab, basis_a, basis_b)?;
-    convert::point_map(
-        c_ab,
-        &BasisRows::new(basis_a, ka),
-        &BasisRows::new(basis_b, kb),
-        conversion,
-        None,
-        &fmaps_nn::NnParams::default(),
-    )
+    let (rows_a, rows_b) = (BasisRows::new(basis_a, ka), BasisRows::new(basis_b, kb));
+    // On large shapes without matrix tiles, the ball search (exact) over
+    // k-means clusters of A's rows: the searched rows (`Φ_A Cᵀ` or `Φ_A`)
+    // are a linear image of them, and a search without guesses otherwise
+    // compares most pairs (80k x 80k at k = 50: ~30 s on one core).
+    let params = if !fmaps_nn::tiles_available()
+        && (BALLS_FROM_ROWS..=BALLS_MAX_ROWS).contains(&rows_a.n())
+        && ka > 0
+    {
+        fmaps_nn::NnParams::with_strategy(fmaps_nn::NnStrategy::Balls).with_partition(
+            fmaps_nn::Partition::kmeans(
+                rows_a.view(ka),
+                fmaps_nn::BALL_SIZE,
+                fmaps_nn::KMEANS_STEPS,
+            ),
+        )
+    } else {
+        fmaps_nn::NnParams::default()
+    };
+    convert::point_map(c_ab, &rows_a, &rows_b, conversion, None, &params)
 }
+
+/// Rows of A from which [`point_map_from_fmap`] searches k-means clusters
+/// (below, the default strategies are as fast).
+pub const BALLS_FROM_ROWS: usize = 20_000;
+/// Rows of A up to which it does (the clusters' k-means cost grows
+/// faster than the search above).
+const BALLS_MAX_ROWS: usize = 250_000;
 
 /// Transfers functions on A (n_A x d) to B through `c_ab`:
 /// `Φ_B C_AB Φ_Aᵀ M_A f` (n_B x d).

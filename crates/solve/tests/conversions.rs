@@ -223,3 +223,47 @@ fn pullback_update_equals_the_direct_pullback() {
         Err(Error::IndexOutOfRange { at: 3, .. })
     ));
 }
+
+/// On shapes above `BALLS_FROM_ROWS` vertices the one-off conversion
+/// searches k-means clusters (without tiles); the map must be the exact
+/// nearest neighbours all the same: the brute-force search of the same
+/// embeddings, both directions of conversion.
+#[test]
+fn large_conversions_equal_the_brute_force_search() {
+    use fmaps_nn::{NnParams, NnStrategy, nearest_rows};
+    if fmaps_nn::tiles_available() {
+        eprintln!(
+            "skipped in part: this CPU has matrix tiles, so the conversion searched with them, not with the clusters"
+        );
+    }
+    let (a, b) = (common::bumpy(150, 140), common::bumpy(141, 150));
+    assert!(a.n_vertices() > BALLS_FROM_ROWS && b.n_vertices() > BALLS_FROM_ROWS);
+    let (ba, bb) = (basis(&a, 12), basis(&b, 12));
+    // A map that is not diagonal: signs and a rotation of a 2-block.
+    let mut c = DMatrix::<f64>::identity(12, 12);
+    for i in 0..12 {
+        c[(i, i)] = if i % 3 == 1 { -1.0 } else { 1.0 };
+    }
+    let (cs, sn) = (0.8f64, 0.6f64);
+    c[(4, 4)] = cs;
+    c[(4, 5)] = -sn;
+    c[(5, 4)] = sn;
+    c[(5, 5)] = cs;
+    let brute = NnParams::with_strategy(NnStrategy::Brute);
+    let rows_a = ba.eigenvectors.clone();
+    let rows_b = bb.eigenvectors.clone();
+    // Direct: data Φ_A Cᵀ, queries Φ_B.
+    let data = &rows_a * c.transpose();
+    let want = nearest_rows(fmaps_nn::view(&data), fmaps_nn::view(&rows_b), None, &brute).unwrap();
+    assert_eq!(point_map_from_fmap(&c, &ba, &bb).unwrap(), want);
+    // Adjoint: data Φ_A, queries Φ_B C.
+    let queries = &rows_b * &c;
+    let want = nearest_rows(
+        fmaps_nn::view(&rows_a),
+        fmaps_nn::view(&queries),
+        None,
+        &brute,
+    )
+    .unwrap();
+    assert_eq!(point_map_from_fmap_adjoint(&c, &ba, &bb).unwrap(), want);
+}
