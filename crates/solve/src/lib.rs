@@ -150,7 +150,7 @@ fn convert_once(
     // On large shapes without matrix tiles, the ball search (exact) over
     // k-means clusters of A's rows: the searched rows (`Φ_A Cᵀ` or `Φ_A`)
     // are a linear image of them, and a search without guesses otherwise
-    // compares most pairs (80k x 80k at k = 50: ~30 s on one core).
+    // compares most pairs (README: the 80k initial point map).
     let params = if !fmaps_nn::tiles_available()
         && (BALLS_FROM_ROWS..=BALLS_MAX_ROWS).contains(&rows_a.n())
         && ka > 0
