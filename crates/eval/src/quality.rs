@@ -29,13 +29,23 @@ pub struct MapQuality {
     pub area_distortion: f64,
     /// Area-weighted mean of the MIPS energy minus one,
     /// `(σ₁² + σ₂²) / (2 σ₁ σ₂) − 1` of each face's affine map to its image
-    /// (0: conformal; faces collapsed or with a degenerate image excluded).
+    /// (0: conformal; faces collapsed or with a degenerate image excluded:
+    /// an image whose area is below [`COLLINEAR`] times its longest edge
+    /// squared is three collinear vertices up to rounding, such as an edge's
+    /// endpoints and midpoint on a subdivided mesh, whose MIPS energy would
+    /// be rounding noise of order 1e11).
     pub conformal_distortion: f64,
     /// With the reverse map: the mean distance from each source vertex to
     /// where `T_BA(T_AB(x))` lands, over √(source area) (0: the maps are
     /// inverse to each other). `None` without the reverse map.
     pub round_trip: Option<f64>,
 }
+
+/// Image triangles with an area below this fraction of their longest edge
+/// squared are degenerate for [`MapQuality::conformal_distortion`] (rounding
+/// leaves ~1e-16 for collinear vertices; a real triangle that thin would
+/// have a MIPS energy of ~1e12).
+pub const COLLINEAR: f64 = 1e-12;
 
 /// Scores the map `t_ab` (for every vertex of `a`, a vertex of `b`) and,
 /// given `t_ba`, the pair of maps (see [`MapQuality`]).
@@ -114,7 +124,11 @@ pub fn map_quality(
             }
         }
         let det = (j[0][0] * j[1][1] - j[0][1] * j[1][0]).abs();
-        if det > 0.0 {
+        let longest2 = [sub(q[1], q[0]), sub(q[2], q[1]), sub(q[0], q[2])]
+            .map(|e| dot(e, e))
+            .into_iter()
+            .fold(0.0, f64::max);
+        if det > 0.0 && image > COLLINEAR * longest2 {
             let fro: f64 = j.iter().flatten().map(|x| x * x).sum();
             sum_conf += ar * (fro / (2.0 * det) - 1.0);
             w_conf += ar;
@@ -228,6 +242,40 @@ mod tests {
         let q = map_quality(&id, &g, &wide, None).unwrap();
         assert!(q.area_distortion.abs() < 1e-12, "{q:?}");
         assert!((q.conformal_distortion - 0.25).abs() < 1e-12, "{q:?}");
+    }
+
+    /// A face mapped onto three collinear vertices (the third placed a third
+    /// of the way along the other two, so rounding leaves a tiny nonzero
+    /// area) is a degenerate image: no conformal term, where its MIPS
+    /// energy would be ~1e12 or more.
+    #[test]
+    fn collinear_images_are_degenerate() {
+        let a = TriMesh::new(
+            vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]],
+            vec![[0, 1, 2]],
+        )
+        .unwrap();
+        let (q0, q1) = ([0.1, 0.7, 0.3], [1.3, 0.2, 0.9]);
+        let q2 = [0, 1, 2].map(|i| q0[i] + (q1[i] - q0[i]) / 3.0);
+        let image = 0.5 * norm(cross(sub(q1, q0), sub(q2, q0)));
+        assert!(
+            image > 0.0 && image < 1e-15,
+            "the test needs rounding residue: {image}"
+        );
+        let b = TriMesh::new(
+            vec![q0, q1, q2, [0.5, 1.5, -0.2]],
+            vec![[0, 1, 3], [1, 2, 3]],
+        )
+        .unwrap();
+        let q = map_quality(&[0, 1, 2], &a, &b, None).unwrap();
+        assert_eq!(q.collapsed_faces, 0.0);
+        assert_eq!(q.conformal_distortion, 0.0, "{q:?}");
+        // A genuine image (the fourth vertex instead) still counts.
+        let q = map_quality(&[0, 1, 3], &a, &b, None).unwrap();
+        assert!(
+            q.conformal_distortion > 0.0 && q.conformal_distortion < 10.0,
+            "{q:?}"
+        );
     }
 
     #[test]
