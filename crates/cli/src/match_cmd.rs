@@ -455,8 +455,9 @@ pub(crate) fn match_cmd(args: &MatchArgs) -> Result<(), Failure> {
     for s in &r.starts {
         outln!(
             o,
-            "  start k = {:<4} conformal distortion {:.3}, orientation {:.3} ({:.2} s){}",
+            "  start k = {:<4} area distortion {:.3}, conformal distortion {:.3}, orientation {:.3} ({:.2} s){}",
             s.k,
+            s.quality.area_distortion,
             s.quality.conformal_distortion,
             s.orientation,
             s.seconds,

@@ -46,6 +46,7 @@ mod from_map;
 mod guards;
 mod named;
 mod starts;
+use fit::{Described, fit_described};
 pub use fit::{Fit, fit_descriptors};
 use from_map::with_refiner;
 pub use from_map::{RefinedMap, refine_point_map};
@@ -251,8 +252,10 @@ pub struct MatchParams {
     /// known to share units and a comparable size).
     pub area_normalize: bool,
     /// Multi-start: further sizes of the initial map. The pipeline is run
-    /// once per size (`k` first, then the others in parallel; a ZoomOut starts from the
-    /// smaller of the size and its `k_start`), and one final map is kept by
+    /// once per size from the same descriptors (all sizes in parallel, or
+    /// with [`restart_below`](Self::restart_below) `k` first; a ZoomOut
+    /// starts from the smaller of the size and its `k_start`), and one
+    /// final map is kept by
     /// [`select`](Self::select) (default: the lowest area distortion). Small initial maps have fewer degrees of freedom for
     /// swapping parts (a left and a right limb) and large ones resolve
     /// more detail; the distortion (or orientation) of the refined map
@@ -625,9 +628,6 @@ pub fn match_prepared(
     params: &MatchParams,
 ) -> Result<MatchResult, MatchError> {
     params.check()?;
-    if !params.starts.is_empty() {
-        return multi_start(a, b, params);
-    }
     let k = params.k;
     for (shape, s) in [("source", a), ("target", b)] {
         if s.basis.k() < params.k_process.max(k) {
@@ -665,7 +665,6 @@ pub fn match_prepared(
             MAX_DESCRIPTOR_BYTES as f64 / 1e9
         )));
     }
-    let mut times = MatchTimes::default();
     let t = Instant::now();
     let lm_a: Vec<usize> = params.landmarks.iter().map(|p| p.0).collect();
     let lm_b: Vec<usize> = params.landmarks.iter().map(|p| p.1).collect();
@@ -674,9 +673,32 @@ pub fn match_prepared(
         || shape_descriptors(b, &lm_b, params),
     );
     let (da, db) = (da?, db?);
-    times.descriptors = t.elapsed().as_secs_f64();
-    let fit = fit_descriptors(a, b, &da, &db, params)?;
-    times.descriptors += fit.times.descriptors;
+    // Checked and compressed once for every start.
+    let described = Described::new(a, b, &da, &db, params)?;
+    drop((da, db));
+    let seconds = t.elapsed().as_secs_f64();
+    if !params.starts.is_empty() {
+        return multi_start(a, b, &described, seconds, params);
+    }
+    let mut out = match_described(a, b, &described, params)?;
+    out.times.descriptors += seconds;
+    out.times.total += seconds;
+    Ok(out)
+}
+
+/// The pipeline from checked, compressed descriptors on (one start, size
+/// `params.k`): fit, point map, refinement, orientation score. The
+/// descriptors' time is the caller's to add.
+fn match_described(
+    a: &PreparedShape,
+    b: &PreparedShape,
+    described: &Described,
+    params: &MatchParams,
+) -> Result<MatchResult, MatchError> {
+    let k = params.k;
+    let mut times = MatchTimes::default();
+    let fit = fit_described(a, b, described, params)?;
+    times.descriptors = fit.times.descriptors;
     times.operators = fit.times.operators;
     times.solve = fit.times.solve;
     let (c_ba, energy_terms, energy_value) = (fit.c_ba, fit.energy_terms, fit.energy);

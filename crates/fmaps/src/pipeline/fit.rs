@@ -43,7 +43,56 @@ pub fn fit_descriptors(
     db: &DMatrix<f64>,
     params: &MatchParams,
 ) -> Result<Fit, MatchError> {
-    let k = params.k;
+    let d = Described::new(a, b, da, db, params)?;
+    let mut fit = fit_described(a, b, &d, params)?;
+    fit.times.descriptors += d.seconds;
+    Ok(fit)
+}
+
+/// Descriptors checked against the shapes and compressed to their span
+/// (with `params.compress`): what [`fit_described`] fits, once per pair
+/// whatever the number of map sizes tried (a multi-start run).
+pub(super) struct Described {
+    da: DMatrix<f64>,
+    db: DMatrix<f64>,
+    /// Seconds of the compression.
+    pub(super) seconds: f64,
+}
+
+impl Described {
+    /// [`fit_descriptors`]'s checks and compression.
+    pub(super) fn new(
+        a: &PreparedShape,
+        b: &PreparedShape,
+        da: &DMatrix<f64>,
+        db: &DMatrix<f64>,
+        params: &MatchParams,
+    ) -> Result<Described, MatchError> {
+        check_descriptors(a, b, da, db, params.k)?;
+        let t = Instant::now();
+        // The energy only sees the span of the descriptors: drop the
+        // directions below rounding level (exact to rounding, ~3x fewer
+        // operators).
+        let (da, db) = if params.compress {
+            solve::compress_descriptors(da, &a.basis.mass, db, &b.basis.mass, 1e-15)?
+        } else {
+            (da.clone(), db.clone())
+        };
+        Ok(Described {
+            da,
+            db,
+            seconds: t.elapsed().as_secs_f64(),
+        })
+    }
+}
+
+fn check_descriptors(
+    a: &PreparedShape,
+    b: &PreparedShape,
+    da: &DMatrix<f64>,
+    db: &DMatrix<f64>,
+    k: usize,
+) -> Result<(), MatchError> {
     for (shape, s, d) in [("source", a, da), ("target", b, db)] {
         if d.nrows() != s.basis.n() {
             return Err(MatchError::InvalidParameter(format!(
@@ -73,20 +122,22 @@ pub fn fit_descriptors(
             db.ncols()
         )));
     }
+    Ok(())
+}
+
+/// The energy of `params` on described shapes, minimised for `C_BA` of
+/// size `params.k` (the compression's time is not counted).
+pub(super) fn fit_described(
+    a: &PreparedShape,
+    b: &PreparedShape,
+    described: &Described,
+    params: &MatchParams,
+) -> Result<Fit, MatchError> {
+    let k = params.k;
+    let (da, db) = (&described.da, &described.db);
     let mut times = MatchTimes::default();
-    let t = Instant::now();
-    // The energy only sees the span of the descriptors: drop the directions
-    // below rounding level (exact to rounding, ~3x fewer operators).
-    let compressed;
-    let (da, db) = if params.compress {
-        compressed = solve::compress_descriptors(da, &a.basis.mass, db, &b.basis.mass, 1e-15)?;
-        (&compressed.0, &compressed.1)
-    } else {
-        (da, db)
-    };
     // The map solved for is C_BA: source of C is B, target A.
     let (sb, sa) = (b.basis.truncate(k), a.basis.truncate(k));
-    times.descriptors = t.elapsed().as_secs_f64();
 
     let t = Instant::now();
     let mut energy = build_energy(

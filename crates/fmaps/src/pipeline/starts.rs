@@ -7,16 +7,20 @@ use std::time::Instant;
 use fmaps_mesh_io::TriMesh;
 use rayon::prelude::*;
 
+use super::fit::Described;
 use super::{
     MatchError, MatchParams, MatchResult, MatchTimes, PreparedShape, Refinement, Start,
-    StartSelection, match_prepared,
+    StartSelection, match_described,
 };
 
-/// [`MatchParams::starts`]: one run per initial size, keep the best
-/// oriented final map.
+/// [`MatchParams::starts`]: one run per initial size from the same
+/// descriptors (computed in `descriptor_seconds`), keep the final map of
+/// the best score.
 pub(super) fn multi_start(
     a: &PreparedShape,
     b: &PreparedShape,
+    described: &Described,
+    descriptor_seconds: f64,
     params: &MatchParams,
 ) -> Result<MatchResult, MatchError> {
     let mut sizes = vec![params.k];
@@ -41,22 +45,30 @@ pub(super) fn multi_start(
             }
             _ => {}
         }
-        match_prepared(a, b, &p)
+        match_described(a, b, described, &p)
     };
-    // The first start alone (it may be enough), the others in parallel.
     let wall = Instant::now();
-    let mut results = vec![run(sizes[0])?];
-    let enough = params
-        .restart_below
-        .is_some_and(|t| sign * results[0].orientation >= t);
-    if !enough {
-        let rest: Vec<Result<MatchResult, MatchError>> =
-            sizes[1..].par_iter().map(|&k| run(k)).collect();
-        for r in rest {
-            results.push(r?);
+    let mut results = Vec::with_capacity(sizes.len());
+    let first = match params.restart_below {
+        // The first start alone (it may be enough), then the others.
+        Some(t) => {
+            let r = run(sizes[0])?;
+            let enough = sign * r.orientation >= t;
+            results.push(r);
+            if enough { sizes.len() } else { 1 }
         }
+        None => 0,
+    };
+    // In parallel (a start's result does not depend on the threads).
+    let rest: Vec<Result<MatchResult, MatchError>> =
+        sizes[first..].par_iter().map(|&k| run(k)).collect();
+    for r in rest {
+        results.push(r?);
     }
-    let mut times = MatchTimes::default();
+    let mut times = MatchTimes {
+        descriptors: descriptor_seconds,
+        ..MatchTimes::default()
+    };
     let mut starts = Vec::with_capacity(results.len());
     let mut best: Option<(usize, f64, MatchResult)> = None;
     let mesh = |s: &PreparedShape| TriMesh::new(s.vertices.clone(), s.faces.clone());
@@ -100,7 +112,7 @@ pub(super) fn multi_start(
         }
     }
     // Stages summed over the starts; the total is the wall-clock time.
-    times.total = wall.elapsed().as_secs_f64();
+    times.total = descriptor_seconds + wall.elapsed().as_secs_f64();
     let (chosen, _, mut out) = best.expect("at least one start");
     starts[chosen].chosen = true;
     out.starts = starts;
