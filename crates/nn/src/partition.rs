@@ -72,7 +72,44 @@ fn nearest_centres(centers: &[f64], c_norm: &[f64], d: usize, nb: usize) -> Vec<
     near
 }
 
+/// Rows up to which [`Partition::for_balls`] clusters (k-means with local
+/// Lloyd steps above 512 clusters: ~n·24·d per step; above, the default
+/// strategies).
+pub const BALLS_MAX_ROWS: usize = 250_000;
+
 impl Partition {
+    /// The default clusters for searching the rows `rows` (n x d) or any
+    /// linear image of them with the ball search, when that is the
+    /// fastest exact search: no matrix tiles on this CPU
+    /// ([`tiles_available`](crate::tiles_available)), `min_rows..=`
+    /// [`BALLS_MAX_ROWS`] rows (below `min_rows`, which depends on the
+    /// caller's searches, the other strategies are as fast), d > 0, and
+    /// `FMAPS_NO_BALLS` unset (`FMAPS_NO_BALLS=1`: `None`, to compare; the
+    /// answers are the same). [`Partition::kmeans`] with [`BALL_SIZE`](crate::BALL_SIZE)
+    /// and [`KMEANS_STEPS`](crate::KMEANS_STEPS).
+    ///
+    /// ```
+    /// let rows = faer::Mat::<f64>::from_fn(3000, 4, |i, j| ((i * (j + 1)) as f64).sin());
+    /// if let Some(p) = fmaps_nn::Partition::for_balls(rows.as_ref(), 1024) {
+    ///     assert_eq!(p.len(), 3000);
+    /// }
+    /// ```
+    pub fn for_balls(rows: MatRef<'_, f64>, min_rows: usize) -> Option<Arc<Partition>> {
+        let off = std::env::var_os("FMAPS_NO_BALLS").is_some_and(|v| !v.is_empty() && v != "0");
+        if off
+            || crate::tiles_available()
+            || rows.ncols() == 0
+            || !(min_rows..=BALLS_MAX_ROWS).contains(&rows.nrows())
+        {
+            return None;
+        }
+        Some(Partition::kmeans(
+            rows,
+            crate::BALL_SIZE,
+            crate::KMEANS_STEPS,
+        ))
+    }
+
     /// k-means clusters of the rows of `rows` (n x d), about `size` rows
     /// each: the principal-direction bisection of the rows into clusters of
     /// at most `size`, then `steps` Lloyd steps (each row to its nearest

@@ -138,6 +138,36 @@ fn prefix_search_equals_brute_force_whatever_the_guesses() {
     }
 }
 
+/// The default clusters of the ball search ([`fmaps_nn::Partition::for_balls`]):
+/// none below the caller's row count, for zero columns, where matrix tiles
+/// exist, or with `FMAPS_NO_BALLS` set (not set in this test); otherwise a
+/// k-means partition of every row, the same as `Partition::kmeans` with the
+/// default sizes.
+#[test]
+fn default_ball_clusters_follow_the_policy() {
+    use fmaps_nn::{BALL_SIZE, KMEANS_STEPS, Partition, tiles_available, view};
+    if std::env::var_os("FMAPS_NO_BALLS").is_some() {
+        eprintln!("note: default_ball_clusters_follow_the_policy: skipped, FMAPS_NO_BALLS is set");
+        return;
+    }
+    let b = grid_basis(48, 24, 20);
+    let rows = b.eigenvectors.columns(0, 20).into_owned();
+    let n = rows.nrows();
+    assert!(Partition::for_balls(view(&rows), n + 1).is_none());
+    assert!(Partition::for_balls(view(&rows).subcols(0, 0), 1).is_none());
+    let got = Partition::for_balls(view(&rows), n);
+    if tiles_available() {
+        eprintln!(
+            "note: default_ball_clusters_follow_the_policy: AMX tiles here, so no clusters (the tile search is used); the clustering is checked without tiles"
+        );
+        assert!(got.is_none());
+    } else {
+        let got = got.expect("clusters without tiles");
+        assert_eq!(got.len(), n);
+        assert_eq!(got, Partition::kmeans(view(&rows), BALL_SIZE, KMEANS_STEPS));
+    }
+}
+
 /// The ball search on spectral embeddings, as ZoomOut runs it: the
 /// clusters computed once on the embedding and reused for linear images
 /// of it (`Φ Cᵀ` for near-isometric and rough maps `C`), and clusters

@@ -429,23 +429,12 @@ fn balls_partitions(
 
 /// Rows from which the balls pay (below, brute force is as fast).
 const BALLS_MIN_ROWS: usize = 1024;
-/// Rows up to which the clusters are computed (k-means with local Lloyd
-/// steps above 512 clusters: ~n·24·k per step).
-const BALLS_MAX_ROWS: usize = 250_000;
 
 /// k-means clusters of the rows `r` (one per ~24 rows) for the ball search
 /// (`NnStrategy::Balls`: exact, and where there are no matrix tiles the
 /// fastest search of a linear image of these rows with guesses), when it
-/// pays: no tiles, 1024-250,000 rows. `FMAPS_NO_BALLS=1` turns it off (to
-/// compare; the maps are the same).
+/// pays ([`fmaps_nn::Partition::for_balls`]: no tiles, 1024-250,000 rows,
+/// `FMAPS_NO_BALLS` unset).
 pub(crate) fn balls_partition(r: &BasisRows) -> Option<std::sync::Arc<fmaps_nn::Partition>> {
-    let off = std::env::var_os("FMAPS_NO_BALLS").is_some_and(|v| !v.is_empty() && v != "0");
-    if off || fmaps_nn::tiles_available() || !(BALLS_MIN_ROWS..=BALLS_MAX_ROWS).contains(&r.n()) {
-        return None;
-    }
-    Some(fmaps_nn::Partition::kmeans(
-        r.view(r.k()),
-        fmaps_nn::BALL_SIZE,
-        fmaps_nn::KMEANS_STEPS,
-    ))
+    fmaps_nn::Partition::for_balls(r.view(r.k()), BALLS_MIN_ROWS)
 }

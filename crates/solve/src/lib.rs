@@ -151,19 +151,9 @@ fn convert_once(
     // k-means clusters of A's rows: the searched rows (`Φ_A Cᵀ` or `Φ_A`)
     // are a linear image of them, and a search without guesses otherwise
     // compares most pairs (README: the 80k initial point map).
-    let params = if !fmaps_nn::tiles_available()
-        && (BALLS_FROM_ROWS..=BALLS_MAX_ROWS).contains(&rows_a.n())
-        && ka > 0
-    {
-        fmaps_nn::NnParams::with_strategy(fmaps_nn::NnStrategy::Balls).with_partition(
-            fmaps_nn::Partition::kmeans(
-                rows_a.view(ka),
-                fmaps_nn::BALL_SIZE,
-                fmaps_nn::KMEANS_STEPS,
-            ),
-        )
-    } else {
-        fmaps_nn::NnParams::default()
+    let params = match fmaps_nn::Partition::for_balls(rows_a.view(ka), BALLS_FROM_ROWS) {
+        Some(p) => fmaps_nn::NnParams::with_strategy(fmaps_nn::NnStrategy::Balls).with_partition(p),
+        None => fmaps_nn::NnParams::default(),
     };
     convert::point_map(c_ab, &rows_a, &rows_b, conversion, None, &params)
 }
@@ -171,9 +161,6 @@ fn convert_once(
 /// Rows of A from which [`point_map_from_fmap`] searches k-means clusters
 /// (below, the default strategies are as fast).
 pub const BALLS_FROM_ROWS: usize = 20_000;
-/// Rows of A up to which it does (the clusters' k-means cost grows
-/// faster than the search above).
-const BALLS_MAX_ROWS: usize = 250_000;
 
 /// Transfers functions on A (n_A x d) to B through `c_ab`:
 /// `Φ_B C_AB Φ_Aᵀ M_A f` (n_B x d).
