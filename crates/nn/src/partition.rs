@@ -77,6 +77,12 @@ fn nearest_centres(centers: &[f64], c_norm: &[f64], d: usize, nb: usize) -> Vec<
 /// strategies).
 pub const BALLS_MAX_ROWS: usize = 250_000;
 
+/// Leading columns of `d` that [`Partition::for_balls`] clusters: half
+/// of them, at least 64 (all of them up to 64).
+pub fn cluster_columns(d: usize) -> usize {
+    (d / 2).max(d.min(64))
+}
+
 impl Partition {
     /// The default clusters for searching the rows `rows` (n x d) or any
     /// linear image of them with the ball search, when that is the
@@ -86,7 +92,12 @@ impl Partition {
     /// caller's searches, the other strategies are as fast), d > 0, and
     /// `FMAPS_NO_BALLS` unset (`FMAPS_NO_BALLS=1`: `None`, to compare; the
     /// answers are the same). [`Partition::kmeans`] with [`BALL_SIZE`](crate::BALL_SIZE)
-    /// and [`KMEANS_STEPS`](crate::KMEANS_STEPS).
+    /// and [`KMEANS_STEPS`](crate::KMEANS_STEPS) of the leading
+    /// [`cluster_columns`]`(d)` columns: on a spectral embedding the
+    /// smoothest eigenfunctions already decide which rows are neighbours,
+    /// and the Lloyd steps cost half as much (FAUST 5k, ZoomOut 50:150:5,
+    /// one thread: ~5% faster than clusters of all 150 columns, the same
+    /// maps; neutral for 30:200:1, whose clusters serve 171 searches).
     ///
     /// ```
     /// let rows = faer::Mat::<f64>::from_fn(3000, 4, |i, j| ((i * (j + 1)) as f64).sin());
@@ -104,7 +115,7 @@ impl Partition {
             return None;
         }
         Some(Partition::kmeans(
-            rows,
+            rows.subcols(0, cluster_columns(rows.ncols())),
             crate::BALL_SIZE,
             crate::KMEANS_STEPS,
         ))

@@ -142,7 +142,8 @@ fn prefix_search_equals_brute_force_whatever_the_guesses() {
 /// none below the caller's row count, for zero columns, where matrix tiles
 /// exist, or with `FMAPS_NO_BALLS` set (not set in this test); otherwise a
 /// k-means partition of every row, the same as `Partition::kmeans` with the
-/// default sizes.
+/// default sizes on the leading `cluster_columns(d)` columns (half of them,
+/// at least 64).
 #[test]
 fn default_ball_clusters_follow_the_policy() {
     use fmaps_nn::{BALL_SIZE, KMEANS_STEPS, Partition, tiles_available, view};
@@ -150,8 +151,13 @@ fn default_ball_clusters_follow_the_policy() {
         eprintln!("note: default_ball_clusters_follow_the_policy: skipped, FMAPS_NO_BALLS is set");
         return;
     }
-    let b = grid_basis(48, 24, 20);
-    let rows = b.eigenvectors.columns(0, 20).into_owned();
+    use fmaps_nn::cluster_columns;
+    assert_eq!(
+        [10, 64, 100, 150, 200].map(cluster_columns),
+        [10, 64, 64, 75, 100]
+    );
+    let b = grid_basis(48, 24, 150);
+    let rows = b.eigenvectors.columns(0, 150).into_owned();
     let n = rows.nrows();
     assert!(Partition::for_balls(view(&rows), n + 1).is_none());
     assert!(Partition::for_balls(view(&rows).subcols(0, 0), 1).is_none());
@@ -164,7 +170,15 @@ fn default_ball_clusters_follow_the_policy() {
     } else {
         let got = got.expect("clusters without tiles");
         assert_eq!(got.len(), n);
-        assert_eq!(got, Partition::kmeans(view(&rows), BALL_SIZE, KMEANS_STEPS));
+        assert_eq!(
+            got,
+            Partition::kmeans(view(&rows).subcols(0, 75), BALL_SIZE, KMEANS_STEPS)
+        );
+        assert_ne!(
+            got,
+            Partition::kmeans(view(&rows), BALL_SIZE, KMEANS_STEPS),
+            "the clusters of all columns differ here, so the test sees the column count"
+        );
     }
 }
 
