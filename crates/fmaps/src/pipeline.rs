@@ -45,14 +45,16 @@ mod fit;
 mod from_map;
 mod guards;
 mod named;
+mod single;
 mod starts;
-use fit::{Described, fit_described};
+use fit::Described;
 pub use fit::{Fit, fit_descriptors};
 use from_map::with_refiner;
 pub use from_map::{RefinedMap, refine_point_map};
 pub use guards::parse_starts;
 use guards::unit_area;
 pub use named::{RefineOptions, RefinerKind, default_starts, named_refinement};
+use single::match_described;
 use starts::multi_start;
 
 /// Errors of the pipeline, naming the stage.
@@ -683,54 +685,6 @@ pub fn match_prepared(
     let mut out = match_described(a, b, &described, params)?;
     out.times.descriptors += seconds;
     out.times.total += seconds;
-    Ok(out)
-}
-
-/// The pipeline from checked, compressed descriptors on (one start, size
-/// `params.k`): fit, point map, refinement, orientation score. The
-/// descriptors' time is the caller's to add.
-fn match_described(
-    a: &PreparedShape,
-    b: &PreparedShape,
-    described: &Described,
-    params: &MatchParams,
-) -> Result<MatchResult, MatchError> {
-    let k = params.k;
-    let mut times = MatchTimes::default();
-    let fit = fit_described(a, b, described, params)?;
-    times.descriptors = fit.times.descriptors;
-    times.operators = fit.times.operators;
-    times.solve = fit.times.solve;
-    let (c_ba, energy_terms, energy_value) = (fit.c_ba, fit.energy_terms, fit.energy);
-    let (sb, sa) = (b.basis.truncate(k), a.basis.truncate(k));
-
-    let t = Instant::now();
-    let t_ab = if params.adjoint {
-        solve::point_map_from_fmap_adjoint(&c_ba, &sb, &sa)?
-    } else {
-        solve::point_map_from_fmap(&c_ba, &sb, &sa)?
-    };
-    times.point_map = t.elapsed().as_secs_f64();
-    times.total = times.descriptors + times.operators + times.solve + times.point_map;
-    let metrics = solve::fmap_metrics(&c_ba, &sb.eigenvalues, &sa.eigenvalues)?;
-    let mut out = MatchResult {
-        t_ab_init: t_ab.clone(),
-        t_ab,
-        c_ba,
-        refine: None,
-        orientation: 0.0,
-        starts: Vec::new(),
-        metrics,
-        energy_terms,
-        energy: energy_value,
-        times,
-    };
-    if let Some(r) = with_refiner(&params.refine, params.adjoint, a, b, |r| {
-        refine_result(&mut out, a, b, r)
-    }) {
-        r?;
-    }
-    out.orientation = orientation_of(&out.t_ab, a, b)?;
     Ok(out)
 }
 
