@@ -237,6 +237,73 @@ fn multi_start_keeps_the_best_oriented_start_and_equals_that_single_run() {
     ));
 }
 
+/// `select_at`: every start's ZoomOut stops at that size, the start of
+/// lowest area distortion there is kept, and only it goes on. With
+/// schedules that all pass through the stop (steps of 4 from 4, 8, 12 and
+/// 20, stop at 24), the kept start's final map is that start's map without
+/// the stop (the continuation repeats its iterations; only the first fit
+/// after the stop is summed directly instead of updated), and its report
+/// holds every iteration of both parts.
+#[test]
+fn select_at_keeps_the_best_start_at_the_stop_and_finishes_only_it() {
+    let a = blob();
+    let (v, f) = a.clone().into_parts();
+    let vb: Vec<[f64; 3]> = v
+        .iter()
+        .map(|p| {
+            let t = 0.15 * p[0];
+            [
+                p[0] * t.cos() - p[1] * t.sin(),
+                p[0] * t.sin() + p[1] * t.cos(),
+                p[2],
+            ]
+        })
+        .collect();
+    let b = TriMesh::new(vb, f).unwrap();
+    let base = MatchParams {
+        refine: Refinement::zoomout(20, 40, 4),
+        starts: vec![4, 8, 12],
+        ..small_params()
+    };
+    let stopped = MatchParams {
+        select_at: Some(24),
+        ..base.clone()
+    };
+    let r = match_shapes(&a, &b, &stopped).unwrap();
+    assert_eq!(r.starts.len(), 4);
+    let kept = r.starts.iter().find(|s| s.chosen).unwrap();
+    for s in &r.starts {
+        assert!(kept.quality.area_distortion <= s.quality.area_distortion);
+    }
+    assert_eq!(r.c_ba.shape(), (40, 40));
+    // The same start without the stop and without the other starts.
+    let mut single = MatchParams {
+        k: kept.k,
+        starts: Vec::new(),
+        ..base.clone()
+    };
+    if let Refinement::ZoomOut { zoomout, .. } = &mut single.refine {
+        zoomout.k_start = zoomout.k_start.min(kept.k);
+    }
+    let s = match_shapes(&a, &b, &single).unwrap();
+    assert_eq!(s.t_ab, r.t_ab, "kept start k = {}", kept.k);
+    let (rr, sr) = (r.refine.as_ref().unwrap(), s.refine.as_ref().unwrap());
+    assert_eq!(rr.iterations.len(), sr.iterations.len());
+    assert_eq!(
+        rr.iterations.iter().map(|i| i.k).collect::<Vec<_>>(),
+        sr.iterations.iter().map(|i| i.k).collect::<Vec<_>>()
+    );
+    // One extra search: the stopped run's conversion at the stop.
+    assert_eq!(rr.nn_searches, sr.nn_searches + 1);
+    // A stop at or past the final size changes nothing.
+    let late = MatchParams {
+        select_at: Some(40),
+        ..base.clone()
+    };
+    let full = match_shapes(&a, &b, &base).unwrap();
+    assert_eq!(match_shapes(&a, &b, &late).unwrap().t_ab, full.t_ab);
+}
+
 /// The map does not depend on the units of either mesh: the built-in pair
 /// (an asymmetric creature and a bent, renumbered copy) matched with
 /// ZoomOut gives the same map when the target's or the source's

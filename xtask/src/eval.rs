@@ -41,6 +41,10 @@ pub struct Args {
     #[arg(long, default_value_t = 1)]
     stride: usize,
     /// Methods (default: every published method found in maps/).
+    /// Modifiers: `METHOD+sinkhorn` (the refiner converts with the Fast
+    /// Sinkhorn Filter), `METHOD+no-stop` (a multi-start ZoomOut runs every
+    /// start to the end instead of stopping them at the middle of the
+    /// schedule: `fmaps match --select-at none`).
     #[arg(long = "method")]
     methods: Vec<String>,
     /// Dataset directory (default: FMAPS_DATA or ../shared/datasets).
@@ -95,6 +99,12 @@ impl MapSource {
             Some((head, tail)) => (format!("{head}{tail}"), true),
             None => (method.to_string(), false),
         };
+        // `METHOD+no-stop`: a multi-start ZoomOut runs every start to the
+        // end (`fmaps match --select-at none`).
+        let (method, no_stop) = match method.split_once("+no-stop") {
+            Some((head, tail)) => (format!("{head}{tail}"), true),
+            None => (method, false),
+        };
         let method = method.as_str();
         let mut source = MapSource::open_nn(c, method, peer_dir)?;
         if sinkhorn {
@@ -103,6 +113,12 @@ impl MapSource {
                     cache.params.refine = with_sinkhorn(&cache.params.refine, method)?;
                 }
                 _ => bail!("+sinkhorn applies to fmaps pipeline methods and REFINER@PUBLISHED"),
+            }
+        }
+        if no_stop {
+            match &mut source {
+                MapSource::Pipeline(cache) => cache.params.select_at = None,
+                _ => bail!("+no-stop applies to fmaps pipeline methods"),
             }
         }
         Ok(source)
@@ -117,6 +133,8 @@ impl MapSource {
             return Ok(MapSource::Pipeline(Box::new(PipelineCache {
                 params: fmaps::MatchParams {
                     k_process: 200.max(refine.k_needed()),
+                    // As `fmaps match`.
+                    select_at: fmaps::pipeline::default_select_at(&refine),
                     refine,
                     starts,
                     restart_below,

@@ -64,6 +64,12 @@ pub(crate) struct MatchArgs {
     /// run).
     #[arg(long, value_name = "SCORE")]
     restart_below: Option<f64>,
+    /// With several starts and a ZoomOut schedule: stop every start's
+    /// ZoomOut at size K, keep the best start there (by --select) and
+    /// finish only that one. Default: the middle of the schedule (100 for
+    /// 50:150:5); `none`: every start runs to the end.
+    #[arg(long, value_name = "K|none")]
+    select_at: Option<String>,
     /// B is a mirror image of A: look for an orientation-reversing map
     /// (the descriptor solve's orientation term reversed; Smooth Shells
     /// aligns A's reflection). Without it, maps preserve orientation and
@@ -273,6 +279,18 @@ pub(crate) fn params_of(args: &MatchArgs, smallest: usize) -> Result<MatchParams
         )));
     }
     params.restart_below = args.restart_below;
+    params.select_at = match args.select_at.as_deref() {
+        None => fmaps::pipeline::default_select_at(&params.refine),
+        Some("none") => None,
+        Some(text) => match text.parse::<usize>() {
+            Ok(k) if k > 0 => Some(k),
+            _ => {
+                return Err(input(anyhow::anyhow!(
+                    "--select-at '{text}': expected a size K >= 1 or none"
+                )));
+            }
+        },
+    };
     params.select = match args.select {
         SelectKind::Conformal => fmaps::pipeline::StartSelection::Conformal,
         SelectKind::Orientation => fmaps::pipeline::StartSelection::Orientation,

@@ -317,6 +317,33 @@ fn match_writes_a_one_based_map_and_reports_stages() {
     assert_eq!(ks, [12, 6, 10]);
     let kept = starts.iter().filter(|s| s["chosen"] == true).count();
     assert_eq!(kept, 1, "{v}");
+    // By default the starts stop at the middle of the schedule (14) and
+    // the kept one goes on; `--select-at none` runs every start to 20.
+    let method = |v: &serde_json::Value| v["refine"]["method"].as_str().unwrap().to_string();
+    assert!(
+        method(&v).contains("zoomout 8:14:4, kept start continued zoomout 14:20:4"),
+        "{v}"
+    );
+    let out = fmaps()
+        .args(["match", &s(&mesh), &s(&mesh), "--json"])
+        .args(["--k", "12", "--k-process", "20", "--n-descr", "30"])
+        .args([
+            "--zoomout",
+            "8:20:4",
+            "--starts",
+            "6,10",
+            "--select-at",
+            "none",
+        ])
+        .output()
+        .unwrap();
+    assert!(out.status.success());
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(method(&v), "zoomout 8:20:4", "{v}");
+    for bad in ["0", "x", "1.5"] {
+        let err = refused(["match", &s(&mesh), &s(&mesh), "--select-at", bad]);
+        assert!(err.contains(&format!("--select-at '{bad}'")), "{err}");
+    }
     let err = refused(["match", &s(&mesh), &s(&mesh), "--starts", "6,x"]);
     assert!(err.contains("--starts '6,x'"), "{err}");
     let err = refused(["match", &s(&mesh), &s(&mesh), "--restart-below", "0.5"]);

@@ -53,7 +53,7 @@ use from_map::with_refiner;
 pub use from_map::{RefinedMap, refine_point_map};
 pub use guards::parse_starts;
 use guards::unit_area;
-pub use named::{RefineOptions, RefinerKind, default_starts, named_refinement};
+pub use named::{RefineOptions, RefinerKind, default_select_at, default_starts, named_refinement};
 use single::match_described;
 use starts::multi_start;
 
@@ -271,6 +271,13 @@ pub struct MatchParams {
     /// (above its negative with `orient_reversing`), so well-oriented
     /// pairs cost one start. `None`: always run every start.
     pub restart_below: Option<f64>,
+    /// With [`starts`](Self::starts) and a ZoomOut refinement: every
+    /// start's ZoomOut stops at this size (when below its final size),
+    /// the start is chosen there by [`select`](Self::select), and only
+    /// the kept one goes on to the final size (the rest of its schedule,
+    /// the same iterations as without the stop). `None`: every start runs
+    /// to the end.
+    pub select_at: Option<usize>,
 }
 
 impl Default for MatchParams {
@@ -298,6 +305,7 @@ impl Default for MatchParams {
             starts: Vec::new(),
             select: StartSelection::default(),
             restart_below: None,
+            select_at: None,
         }
     }
 }

@@ -28,7 +28,9 @@ use std::path::PathBuf;
 use std::sync::Arc;
 
 use fmaps::mesh_io::TriMesh;
-use fmaps::pipeline::{MatchParams, RefineOptions, RefinerKind, default_starts, named_refinement};
+use fmaps::pipeline::{
+    MatchParams, RefineOptions, RefinerKind, default_select_at, default_starts, named_refinement,
+};
 use nalgebra::DMatrix;
 use numpy::ndarray::{Array1, Array2, ShapeBuilder};
 use numpy::{IntoPyArray, PyArray1, PyArray2, PyReadonlyArray1, PyReadonlyArray2};
@@ -282,6 +284,7 @@ fn params_for(
     p.refine =
         named_refinement(kind, &options).map_err(|e| err(format!("refine = {refine:?}: {e}")))?;
     p.starts = default_starts(kind, k_process.max(p.refine.k_needed()));
+    p.select_at = default_select_at(&p.refine);
     Ok(p)
 }
 

@@ -10,8 +10,9 @@ use rayon::prelude::*;
 use super::fit::Described;
 use super::{
     MatchError, MatchParams, MatchResult, MatchTimes, PreparedShape, Refinement, Start,
-    StartSelection, match_described,
+    StartSelection, match_described, orientation_of, refine_result, with_refiner,
 };
+use crate::refine;
 
 /// [`MatchParams::starts`]: one run per initial size from the same
 /// descriptors (computed in `descriptor_seconds`), keep the final map of
@@ -30,6 +31,12 @@ pub(super) fn multi_start(
         }
     }
     let sign = if params.orient_reversing { -1.0 } else { 1.0 };
+    // A ZoomOut may stop every start at `select_at`: the kept one then
+    // goes on alone.
+    let stop = match (&params.refine, params.select_at) {
+        (Refinement::ZoomOut { zoomout, .. }, Some(s)) if s < zoomout.k_final => Some(s),
+        _ => None,
+    };
     let run = |k: usize| -> Result<MatchResult, MatchError> {
         let mut p = MatchParams {
             k,
@@ -37,7 +44,13 @@ pub(super) fn multi_start(
             ..params.clone()
         };
         match &mut p.refine {
-            Refinement::ZoomOut { zoomout, .. } => zoomout.k_start = zoomout.k_start.min(k),
+            Refinement::ZoomOut { zoomout, .. } => {
+                zoomout.k_start = zoomout.k_start.min(k);
+                if let Some(s) = stop {
+                    zoomout.k_final = s;
+                    zoomout.k_start = zoomout.k_start.min(s);
+                }
+            }
             Refinement::Custom(r) => {
                 if let Some(r) = r.for_initial_size(k) {
                     p.refine = Refinement::Custom(Arc::from(r));
@@ -111,9 +124,39 @@ pub(super) fn multi_start(
             best = Some((starts.len() - 1, score, r));
         }
     }
+    let (chosen, _, mut out) = best.expect("at least one start");
+    if let (Some(s), Refinement::ZoomOut { zoomout, samples }) = (stop, &params.refine) {
+        // The kept start's ZoomOut from `s` on: the same iterations as
+        // without the stop, from its map and its s x s fit.
+        let rest = Refinement::ZoomOut {
+            zoomout: refine::ZoomOut {
+                k_start: s,
+                ..zoomout.clone()
+            },
+            samples: *samples,
+        };
+        let first = out.refine.take();
+        let before = out.times.refine;
+        if let Some(r) = with_refiner(&rest, params.adjoint, a, b, |r| {
+            refine_result(&mut out, a, b, r)
+        }) {
+            r?;
+        }
+        times.refine += out.times.refine;
+        out.times.refine += before;
+        if let (Some(first), Some(second)) = (first, out.refine.as_mut()) {
+            second.method = format!("{}, kept start continued {}", first.method, second.method);
+            let mut its = first.iterations;
+            its.append(&mut second.iterations);
+            second.iterations = its;
+            second.nn_searches += first.nn_searches;
+            second.nn_seconds += first.nn_seconds;
+            second.seconds += first.seconds;
+        }
+        out.orientation = orientation_of(&out.t_ab, a, b)?;
+    }
     // Stages summed over the starts; the total is the wall-clock time.
     times.total = descriptor_seconds + wall.elapsed().as_secs_f64();
-    let (chosen, _, mut out) = best.expect("at least one start");
     starts[chosen].chosen = true;
     out.starts = starts;
     out.times = times;

@@ -1,0 +1,59 @@
+//! One start of the pipeline from described shapes: fit, point map,
+//! refinement, orientation score.
+
+use std::time::Instant;
+
+use super::fit::{Described, fit_described};
+use super::{
+    MatchError, MatchParams, MatchResult, MatchTimes, PreparedShape, orientation_of, refine_result,
+    with_refiner,
+};
+use crate::solve;
+
+/// The pipeline from checked, compressed descriptors on (one start, size
+/// `params.k`): fit, point map, refinement, orientation score. The
+/// descriptors' time is the caller's to add.
+pub(super) fn match_described(
+    a: &PreparedShape,
+    b: &PreparedShape,
+    described: &Described,
+    params: &MatchParams,
+) -> Result<MatchResult, MatchError> {
+    let k = params.k;
+    let mut times = MatchTimes::default();
+    let fit = fit_described(a, b, described, params)?;
+    times.descriptors = fit.times.descriptors;
+    times.operators = fit.times.operators;
+    times.solve = fit.times.solve;
+    let (c_ba, energy_terms, energy_value) = (fit.c_ba, fit.energy_terms, fit.energy);
+    let (sb, sa) = (b.basis.truncate(k), a.basis.truncate(k));
+
+    let t = Instant::now();
+    let t_ab = if params.adjoint {
+        solve::point_map_from_fmap_adjoint(&c_ba, &sb, &sa)?
+    } else {
+        solve::point_map_from_fmap(&c_ba, &sb, &sa)?
+    };
+    times.point_map = t.elapsed().as_secs_f64();
+    times.total = times.descriptors + times.operators + times.solve + times.point_map;
+    let metrics = solve::fmap_metrics(&c_ba, &sb.eigenvalues, &sa.eigenvalues)?;
+    let mut out = MatchResult {
+        t_ab_init: t_ab.clone(),
+        t_ab,
+        c_ba,
+        refine: None,
+        orientation: 0.0,
+        starts: Vec::new(),
+        metrics,
+        energy_terms,
+        energy: energy_value,
+        times,
+    };
+    if let Some(r) = with_refiner(&params.refine, params.adjoint, a, b, |r| {
+        refine_result(&mut out, a, b, r)
+    }) {
+        r?;
+    }
+    out.orientation = orientation_of(&out.t_ab, a, b)?;
+    Ok(out)
+}
