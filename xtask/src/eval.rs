@@ -130,16 +130,18 @@ impl MapSource {
         peer_dir: &std::path::Path,
     ) -> anyhow::Result<MapSource> {
         if let Some((refine, starts, restart_below)) = pipeline_method(method)? {
+            // As `fmaps match`: the stop of the starts, and the eigenpairs
+            // the pipeline uses.
+            let mut params = fmaps::MatchParams {
+                select_at: fmaps::pipeline::default_select_at(&refine),
+                refine,
+                starts,
+                restart_below,
+                ..fmaps::MatchParams::default()
+            };
+            params.k_process = params.k_process_needed();
             return Ok(MapSource::Pipeline(Box::new(PipelineCache {
-                params: fmaps::MatchParams {
-                    k_process: 200.max(refine.k_needed()),
-                    // As `fmaps match`.
-                    select_at: fmaps::pipeline::default_select_at(&refine),
-                    refine,
-                    starts,
-                    restart_below,
-                    ..fmaps::MatchParams::default()
-                },
+                params,
                 shapes: HashMap::new(),
             })));
         }

@@ -24,9 +24,12 @@ pub(crate) struct MatchArgs {
     /// Size of the functional map (k x k).
     #[arg(long, short = 'k', default_value_t = defaults().k)]
     k: usize,
-    /// Eigenpairs computed per shape.
-    #[arg(long, default_value_t = defaults().k_process)]
-    k_process: usize,
+    /// Eigenpairs computed per shape (at least what the refinement
+    /// needs). Default: those the pipeline uses (`k_process_needed`: 200
+    /// for the default Smooth Shells, 150 for ZoomOut 50:150, 128 without
+    /// refinement).
+    #[arg(long)]
+    k_process: Option<usize>,
     /// Descriptor family.
     #[arg(long, default_value_t = defaults().descriptor)]
     descriptor: fmaps::pipeline::DescriptorKind,
@@ -248,10 +251,13 @@ pub(crate) fn zoomout_failure(e: fmaps::pipeline::MatchError) -> Failure {
 /// defaults where a flag is not given) and meshes whose smaller one has
 /// `smallest` vertices.
 pub(crate) fn params_of(args: &MatchArgs, smallest: usize) -> Result<MatchParams, Failure> {
+    // Before the refinement is known: the given value, or the library's
+    // default (then lowered to what the pipeline uses, below).
+    let k_process = args.k_process.unwrap_or(defaults().k_process);
     let mut params = MatchParams {
         k: args.k,
-        k_process: args.k_process,
-        k_descr: defaults().k_descr.min(args.k_process),
+        k_process,
+        k_descr: defaults().k_descr.min(k_process),
         descriptor: args.descriptor,
         n_descr: args.n_descr,
         w_orient: args.w_orient,
@@ -296,7 +302,10 @@ pub(crate) fn params_of(args: &MatchArgs, smallest: usize) -> Result<MatchParams
         SelectKind::Orientation => fmaps::pipeline::StartSelection::Orientation,
         SelectKind::Area => fmaps::pipeline::StartSelection::Area,
     };
-    params.k_process = params.k_process.max(params.refine.k_needed());
+    params.k_process = match args.k_process {
+        Some(k) => k.max(params.refine.k_needed()),
+        None => params.k_process_needed(),
+    };
     Ok(params)
 }
 
@@ -585,5 +594,22 @@ mod tests {
             Refinement::Icp(icp) => assert_eq!(icp, Icp::default()),
             other => panic!("{other:?}"),
         }
+    }
+
+    /// Without `--k-process`, the eigenpairs the pipeline reads (the
+    /// default Smooth Shells: the library's 200); with it, the value
+    /// given, raised to what the refinement needs.
+    #[test]
+    fn k_process_defaults_to_what_the_pipeline_uses() {
+        let k = |extra: &[&str]| parse(extra).k_process;
+        assert_eq!(k(&[]), MatchParams::default().k_process);
+        assert_eq!(k(&[]), parse(&[]).k_process_needed());
+        assert_eq!(k(&["--refine", "zoomout"]), 150);
+        assert_eq!(k(&["--refine", "zoomout", "--zoomout", "30:200:1"]), 200);
+        assert_eq!(k(&["--refine", "none"]), 128);
+        assert_eq!(k(&["--refine", "none", "--k", "160"]), 160);
+        assert_eq!(k(&["--refine", "none", "--starts", "8,170"]), 170);
+        assert_eq!(k(&["--refine", "zoomout", "--k-process", "180"]), 180);
+        assert_eq!(k(&["--refine", "zoomout", "--k-process", "60"]), 150);
     }
 }

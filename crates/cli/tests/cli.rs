@@ -357,12 +357,31 @@ fn match_writes_a_one_based_map_and_reports_stages() {
         let err = String::from_utf8_lossy(&out.stderr);
         assert!(err.contains("--zoomout"), "{err}");
     }
-    // k larger than the computed basis: bad usage, exit 2.
+    // k larger than the basis asked for: bad usage, exit 2. (Without
+    // --k-process the basis grows to k.)
     let out = fmaps()
-        .args(["match", &s(&mesh), &s(&mesh), "--k", "300"])
+        .args([
+            "match",
+            &s(&mesh),
+            &s(&mesh),
+            "--k",
+            "300",
+            "--k-process",
+            "200",
+        ])
         .output()
         .unwrap();
     assert_eq!(out.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("k_process"), "{err}");
+    // k beyond the mesh's vertices: the eigenbasis cannot hold it, exit 2.
+    let n = m.n_vertices().to_string();
+    let out = fmaps()
+        .args(["match", &s(&mesh), &s(&mesh), "--refine", "none", "--k", &n])
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{err}");
 }
 
 #[test]

@@ -345,7 +345,7 @@ fn indices(py: Python<'_>, v: &[usize]) -> Py<PyArray1<i64>> {
 /// defaults and the same maps for the same options, on any number of
 /// threads).
 #[pyfunction]
-#[pyo3(signature = (a, b, *, refine = "default", k = 50, k_process = 200, schedule = None, landmarks = None, w_orient = None, mirrored = false, non_isometric = false, area_normalize = true, starts = None, threads = None))]
+#[pyo3(signature = (a, b, *, refine = "default", k = 50, k_process = None, schedule = None, landmarks = None, w_orient = None, mirrored = false, non_isometric = false, area_normalize = true, starts = None, threads = None))]
 #[allow(clippy::too_many_arguments)]
 fn match_shapes(
     py: Python<'_>,
@@ -353,7 +353,7 @@ fn match_shapes(
     b: &Mesh,
     refine: &str,
     k: usize,
-    k_process: usize,
+    k_process: Option<usize>,
     schedule: Option<String>,
     landmarks: Option<Vec<(i64, i64)>>,
     w_orient: Option<f64>,
@@ -371,7 +371,7 @@ fn match_shapes(
         schedule,
         smallest,
         k,
-        k_process,
+        k_process.unwrap_or(MatchParams::default().k_process),
         w_orient,
         (mirrored, non_isometric),
         area_normalize,
@@ -380,8 +380,12 @@ fn match_shapes(
         // Further initial sizes (`[]`: one start, as pyFM runs ZoomOut).
         params.starts = s;
     }
-    // The refinement's eigenpairs are computed, as `fmaps match` does.
-    params.k_process = params.k_process.max(params.refine.k_needed());
+    // As `fmaps match`: the eigenpairs the pipeline uses, or those given
+    // (at least the refinement's).
+    params.k_process = match k_process {
+        Some(kp) => kp.max(params.refine.k_needed()),
+        None => params.k_process_needed(),
+    };
     params.landmarks = landmarks;
     let (r, quality) = run(py, threads, move || {
         let r = fmaps::match_shapes(&ma, &mb, &params).map_err(|e| e.to_string())?;

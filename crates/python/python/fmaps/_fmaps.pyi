@@ -86,7 +86,7 @@ def match_shapes(
     *,
     refine: str = "default",
     k: int = 50,
-    k_process: int = 200,
+    k_process: Optional[int] = None,
     schedule: Optional[str] = None,
     landmarks: Optional[list] = None,
     w_orient: Optional[float] = None,
@@ -99,6 +99,7 @@ def match_shapes(
     """The pipeline of `fmaps match`; refine: "default" (Smooth Shells), or a name of `fmaps match --refine`:
     "none", "icp", "zoomout", "bijective-zoomout", "discrete", "bcicp", "smooth-shells"; schedule: "START:FINAL:STEP"
     for ZoomOut and the discrete presets; landmarks: (vertex of A, vertex of B) pairs, 0-based; starts: further initial sizes ([] = one start; None = the CLI's default);
+    k_process: eigenpairs computed (None: those the pipeline uses, as the CLI: 200 for Smooth Shells, 150 for ZoomOut);
     non_isometric: the shapes are not near-isometric (different people or animals), as `fmaps match --non-isometric`."""
 
 def prepare(
