@@ -275,8 +275,10 @@ pub struct MatchParams {
     /// start's ZoomOut stops at this size (when below its final size),
     /// the start is chosen there by [`select`](Self::select), and only
     /// the kept one goes on to the final size (the rest of its schedule,
-    /// the same iterations as without the stop). `None`: every start runs
-    /// to the end.
+    /// the same iterations as without the stop when its sizes pass
+    /// through the stop). `None`: every start runs to the end;
+    /// [`pipeline::default_select_at`](crate::pipeline::default_select_at):
+    /// what `fmaps match` uses.
     pub select_at: Option<usize>,
 }
 
@@ -573,9 +575,10 @@ pub struct MatchResult {
 pub struct Start {
     /// Size of the initial map.
     pub k: usize,
-    /// Orientation score of its final map.
+    /// Orientation score of its final map (of its map at
+    /// [`MatchParams::select_at`] when the starts stopped there).
     pub orientation: f64,
-    /// Scores of its final map without ground truth (unit-area shapes).
+    /// Scores of that map without ground truth (unit-area shapes).
     pub quality: crate::eval::MapQuality,
     /// Its map was kept.
     pub chosen: bool,

@@ -126,8 +126,9 @@ pub(super) fn multi_start(
     }
     let (chosen, _, mut out) = best.expect("at least one start");
     if let (Some(s), Refinement::ZoomOut { zoomout, samples }) = (stop, &params.refine) {
-        // The kept start's ZoomOut from `s` on: the same iterations as
-        // without the stop, from its map and its s x s fit.
+        // The kept start's ZoomOut from `s` on, from its map and its
+        // s x s fit: the rest of the schedule (the same iterations as
+        // without the stop when the start's sizes pass through s).
         let rest = Refinement::ZoomOut {
             zoomout: refine::ZoomOut {
                 k_start: s,
