@@ -21,6 +21,24 @@ fn blob() -> TriMesh {
     TriMesh::new(v, f).unwrap()
 }
 
+/// `a` bent about the z axis by an angle of `rate · x` at each point (the
+/// same vertices in the same order: the truth is the identity).
+fn bent(a: &TriMesh, rate: f64) -> TriMesh {
+    let (v, f) = a.clone().into_parts();
+    let vb: Vec<[f64; 3]> = v
+        .iter()
+        .map(|p| {
+            let t = rate * p[0];
+            [
+                p[0] * t.cos() - p[1] * t.sin(),
+                p[0] * t.sin() + p[1] * t.cos(),
+                p[2],
+            ]
+        })
+        .collect();
+    TriMesh::new(vb, f).unwrap()
+}
+
 fn small_params() -> MatchParams {
     MatchParams {
         k_process: 40,
@@ -137,19 +155,8 @@ fn multi_start_keeps_the_best_oriented_start_and_equals_that_single_run() {
     // A against a bent copy of itself (the truth is the identity).
     let a = blob();
     let n = a.n_vertices();
-    let (v, f) = a.clone().into_parts();
-    let vb: Vec<[f64; 3]> = v
-        .iter()
-        .map(|p| {
-            let t = 0.1 * p[0];
-            [
-                p[0] * t.cos() - p[1] * t.sin(),
-                p[0] * t.sin() + p[1] * t.cos(),
-                p[2],
-            ]
-        })
-        .collect();
-    let b = TriMesh::new(vb, f).unwrap();
+    let v = a.vertices().to_vec();
+    let b = bent(&a, 0.1);
     for (reversing, sign) in [(false, 1.0), (true, -1.0)] {
         let base = MatchParams {
             refine: Refinement::zoomout(20, 30, 5),
@@ -247,19 +254,7 @@ fn multi_start_keeps_the_best_oriented_start_and_equals_that_single_run() {
 #[test]
 fn select_at_keeps_the_best_start_at_the_stop_and_finishes_only_it() {
     let a = blob();
-    let (v, f) = a.clone().into_parts();
-    let vb: Vec<[f64; 3]> = v
-        .iter()
-        .map(|p| {
-            let t = 0.15 * p[0];
-            [
-                p[0] * t.cos() - p[1] * t.sin(),
-                p[0] * t.sin() + p[1] * t.cos(),
-                p[2],
-            ]
-        })
-        .collect();
-    let b = TriMesh::new(vb, f).unwrap();
+    let b = bent(&a, 0.15);
     let base = MatchParams {
         refine: Refinement::zoomout(20, 40, 4),
         starts: vec![4, 8, 12],
