@@ -479,15 +479,8 @@ pub(crate) fn match_cmd(args: &MatchArgs) -> Result<(), Failure> {
         quality.area_distortion,
         quality.conformal_distortion
     );
-    let stop = match (&params.refine, params.select_at) {
-        (fmaps::pipeline::Refinement::ZoomOut { zoomout, .. }, Some(k))
-            if !r.starts.is_empty() && k < zoomout.k_final =>
-        {
-            Some((k, zoomout.k_final))
-        }
-        _ => None,
-    };
-    if let Some((k, kf)) = stop {
+    if let Some(k) = params.starts_stop() {
+        let kf = r.c_ba.ncols();
         outln!(
             o,
             "starts scored at k = {k}, where only the kept one went on to {kf} (--select-at none: every start to the end):"

@@ -704,7 +704,6 @@ pub fn match_prepared(
     let (da, db) = (da?, db?);
     // Checked and compressed once for every start.
     let described = Described::new(a, b, &da, &db, params)?;
-    drop((da, db));
     let seconds = t.elapsed().as_secs_f64();
     if !params.starts.is_empty() {
         return multi_start(a, b, &described, seconds, params);

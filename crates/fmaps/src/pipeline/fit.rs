@@ -2,6 +2,7 @@
 //! (from [`shape_descriptors`](super::shape_descriptors)) or any per-vertex
 //! features with corresponding columns.
 
+use std::borrow::Cow;
 use std::time::Instant;
 
 use fmaps_solve::build_energy;
@@ -52,31 +53,34 @@ pub fn fit_descriptors(
 /// Descriptors checked against the shapes and compressed to their span
 /// (with `params.compress`): what [`fit_described`] fits, once per pair
 /// whatever the number of map sizes tried (a multi-start run).
-pub(super) struct Described {
-    da: DMatrix<f64>,
-    db: DMatrix<f64>,
+pub(super) struct Described<'a> {
+    da: Cow<'a, DMatrix<f64>>,
+    db: Cow<'a, DMatrix<f64>>,
     /// Seconds of the compression.
     pub(super) seconds: f64,
 }
 
-impl Described {
-    /// [`fit_descriptors`]'s checks and compression.
+impl<'a> Described<'a> {
+    /// [`fit_descriptors`]'s checks and compression (without it, the
+    /// descriptors as given, borrowed).
     pub(super) fn new(
         a: &PreparedShape,
         b: &PreparedShape,
-        da: &DMatrix<f64>,
-        db: &DMatrix<f64>,
+        da: &'a DMatrix<f64>,
+        db: &'a DMatrix<f64>,
         params: &MatchParams,
-    ) -> Result<Described, MatchError> {
+    ) -> Result<Described<'a>, MatchError> {
         check_descriptors(a, b, da, db, params.k)?;
         let t = Instant::now();
         // The energy only sees the span of the descriptors: drop the
         // directions below rounding level (exact to rounding, ~3x fewer
         // operators).
         let (da, db) = if params.compress {
-            solve::compress_descriptors(da, &a.basis.mass, db, &b.basis.mass, 1e-15)?
+            let (ca, cb) =
+                solve::compress_descriptors(da, &a.basis.mass, db, &b.basis.mass, 1e-15)?;
+            (Cow::Owned(ca), Cow::Owned(cb))
         } else {
-            (da.clone(), db.clone())
+            (Cow::Borrowed(da), Cow::Borrowed(db))
         };
         Ok(Described {
             da,
@@ -130,11 +134,11 @@ fn check_descriptors(
 pub(super) fn fit_described(
     a: &PreparedShape,
     b: &PreparedShape,
-    described: &Described,
+    described: &Described<'_>,
     params: &MatchParams,
 ) -> Result<Fit, MatchError> {
     let k = params.k;
-    let (da, db) = (&described.da, &described.db);
+    let (da, db) = (described.da.as_ref(), described.db.as_ref());
     let mut times = MatchTimes::default();
     // The map solved for is C_BA: source of C is B, target A.
     let (sb, sa) = (b.basis.truncate(k), a.basis.truncate(k));

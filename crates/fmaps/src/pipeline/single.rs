@@ -16,7 +16,7 @@ use crate::solve;
 pub(super) fn match_described(
     a: &PreparedShape,
     b: &PreparedShape,
-    described: &Described,
+    described: &Described<'_>,
     params: &MatchParams,
 ) -> Result<MatchResult, MatchError> {
     let k = params.k;

@@ -14,13 +14,29 @@ use super::{
 };
 use crate::refine;
 
+impl MatchParams {
+    /// The size at which a multi-start run stops its starts
+    /// ([`select_at`](Self::select_at)): `Some` only with starts, a
+    /// ZoomOut refinement and a stop below its final size.
+    pub fn starts_stop(&self) -> Option<usize> {
+        match (&self.refine, self.select_at) {
+            (Refinement::ZoomOut { zoomout, .. }, Some(s))
+                if !self.starts.is_empty() && s < zoomout.k_final =>
+            {
+                Some(s)
+            }
+            _ => None,
+        }
+    }
+}
+
 /// [`MatchParams::starts`]: one run per initial size from the same
 /// descriptors (computed in `descriptor_seconds`), keep the final map of
 /// the best score.
 pub(super) fn multi_start(
     a: &PreparedShape,
     b: &PreparedShape,
-    described: &Described,
+    described: &Described<'_>,
     descriptor_seconds: f64,
     params: &MatchParams,
 ) -> Result<MatchResult, MatchError> {
@@ -33,10 +49,7 @@ pub(super) fn multi_start(
     let sign = if params.orient_reversing { -1.0 } else { 1.0 };
     // A ZoomOut may stop every start at `select_at`: the kept one then
     // goes on alone.
-    let stop = match (&params.refine, params.select_at) {
-        (Refinement::ZoomOut { zoomout, .. }, Some(s)) if s < zoomout.k_final => Some(s),
-        _ => None,
-    };
+    let stop = params.starts_stop();
     let run = |k: usize| -> Result<MatchResult, MatchError> {
         let mut p = MatchParams {
             k,
