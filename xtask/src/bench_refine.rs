@@ -80,7 +80,7 @@ fn peak_mib() -> f64 {
 /// ZoomOut on the ~80k-vertex subdivided pair.
 fn large(args: &Args, c: &Collection, a: &str, b: &str) -> anyhow::Result<()> {
     use fmaps::mesh_io::generate::subdivide;
-    use fmaps::refine::{Subsample, farthest_point_sampling};
+    use fmaps::refine::Subsample;
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(args.bench.threads)
         .build()?;
@@ -97,10 +97,11 @@ fn large(args: &Args, c: &Collection, a: &str, b: &str) -> anyhow::Result<()> {
         k_start: 30,
         k_final: 200,
         step: 1,
-        subsample: Some(Subsample {
-            a: farthest_point_sampling(&pb.vertices, args.samples, 0),
-            b: farthest_point_sampling(&pa.vertices, args.samples, 0),
-        }),
+        subsample: Some(Subsample::farthest(
+            &pb.vertices,
+            &pa.vertices,
+            args.samples,
+        )),
         ..ZoomOut::default()
     };
     let t_fps = t.elapsed().as_secs_f64();

@@ -310,7 +310,7 @@ fn run_pair(shapes: &mut Shapes<'_>, m: &MatchArgs, p: &Pair, stem: &str) -> Res
     let t = Instant::now();
     let (ma, _) = shapes.mesh(&p.a, p.line)?;
     let (mb, _) = shapes.mesh(&p.b, p.line)?;
-    let params = match_cmd::params_of(m, ma.n_vertices().min(mb.n_vertices()))?;
+    let params = match_cmd::params_of(m, (ma.n_vertices(), mb.n_vertices()))?;
     let (pa, hit_a) = shapes.prepared(&p.a, p.line, &params)?;
     let (pb, hit_b) = shapes.prepared(&p.b, p.line, &params)?;
     let r = match_prepared(&pa, &pb, &params).map_err(runtime)?;

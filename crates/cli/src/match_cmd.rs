@@ -168,10 +168,13 @@ pub(crate) struct RefinerFlags {
     /// ICP iterations (stops earlier at a fixed point).
     #[arg(long, default_value_t = Icp::default().max_iterations)]
     icp_iterations: usize,
-    /// Run the ZoomOut iterations on this many farthest points per shape
-    /// (the paper's fast variant); the final map covers all vertices.
-    #[arg(long)]
-    refine_samples: Option<usize>,
+    /// Run the ZoomOut iterations on N farthest points per shape (the
+    /// paper's fast variant; the final map covers all vertices), or on
+    /// every vertex (`all`). Default: every vertex up to 20000 vertices in
+    /// the larger mesh, 5000 samples above
+    /// (`fmaps::pipeline::default_refine_samples`; the output says so).
+    #[arg(long, value_name = "N|all", value_parser = parse_refine_samples)]
+    refine_samples: Option<SamplesFlag>,
     /// Bijective ZoomOut: refine both directions together.
     #[arg(long)]
     bijective: bool,
@@ -186,20 +189,57 @@ pub(crate) struct RefinerFlags {
     conversion: ConversionKind,
 }
 
+/// `--refine-samples`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum SamplesFlag {
+    /// Every vertex.
+    All,
+    /// This many farthest points per shape.
+    Count(usize),
+}
+
+fn parse_refine_samples(text: &str) -> Result<SamplesFlag, String> {
+    match text {
+        "all" => Ok(SamplesFlag::All),
+        _ => match text.parse::<usize>() {
+            Ok(n) if n > 0 => Ok(SamplesFlag::Count(n)),
+            _ => Err(format!(
+                "'{text}': expected a number of samples N >= 1 or all"
+            )),
+        },
+    }
+}
+
 impl RefinerFlags {
+    /// The farthest points per shape ZoomOut's iterations run on for
+    /// meshes of `n_a` and `n_b` vertices (`None`: every vertex), and
+    /// whether that was chosen automatically (no `--refine-samples`).
+    pub(crate) fn samples(&self, n_a: usize, n_b: usize) -> (Option<usize>, bool) {
+        match self.refine_samples {
+            Some(SamplesFlag::All) => (None, false),
+            Some(SamplesFlag::Count(n)) => (Some(n), false),
+            None => {
+                let auto = fmaps::pipeline::default_refine_samples(n_a, n_b);
+                (auto, auto.is_some())
+            }
+        }
+    }
+
     /// The library's refinement options for these flags, a map of size
-    /// `k` and the given orientation settings.
+    /// `k`, the given orientation settings and meshes of `n_a` and `n_b`
+    /// vertices.
     pub(crate) fn options(
         &self,
         k: usize,
         mirrored: bool,
         non_isometric: bool,
+        (n_a, n_b): (usize, usize),
     ) -> fmaps::pipeline::RefineOptions {
         fmaps::pipeline::RefineOptions {
             k,
             schedule: self.zoomout.clone(),
             icp_iterations: self.icp_iterations,
-            samples: self.refine_samples,
+            samples: self.samples(n_a, n_b).0,
             bijective: self.bijective,
             adjoint: self.adjoint,
             sinkhorn: self.conversion == ConversionKind::Sinkhorn,
@@ -224,20 +264,20 @@ pub(crate) fn read_landmarks(path: &Path) -> Result<mesh_io::Landmarks, Failure>
 
 /// The refinement asked for on the command line (its kind and the
 /// facade's refinement); without refinement flags the facade's default
-/// for meshes whose smaller one has `smallest` vertices.
+/// for meshes of `n_a` and `n_b` vertices.
 fn refinement(
     args: &MatchArgs,
-    smallest: usize,
+    (n_a, n_b): (usize, usize),
 ) -> Result<(fmaps::pipeline::RefinerKind, fmaps::pipeline::Refinement), Failure> {
     use fmaps::pipeline::RefinerKind;
     let kind = match (args.refine, &args.refiner.zoomout) {
         (Some(k), _) => k.kind(),
         (None, Some(_)) => RefinerKind::Zoomout,
-        (None, None) => RefinerKind::default_for(smallest),
+        (None, None) => RefinerKind::default_for(n_a.min(n_b)),
     };
     let options = args
         .refiner
-        .options(args.k, args.mirrored, args.non_isometric);
+        .options(args.k, args.mirrored, args.non_isometric, (n_a, n_b));
     let r = fmaps::pipeline::named_refinement(kind, &options).map_err(zoomout_failure)?;
     Ok((kind, r))
 }
@@ -248,9 +288,9 @@ pub(crate) fn zoomout_failure(e: fmaps::pipeline::MatchError) -> Failure {
 }
 
 /// The pipeline's parameters for the command line `args` (the library's
-/// defaults where a flag is not given) and meshes whose smaller one has
-/// `smallest` vertices.
-pub(crate) fn params_of(args: &MatchArgs, smallest: usize) -> Result<MatchParams, Failure> {
+/// defaults where a flag is not given) and meshes of `sizes.0` and
+/// `sizes.1` vertices.
+pub(crate) fn params_of(args: &MatchArgs, sizes: (usize, usize)) -> Result<MatchParams, Failure> {
     // Before the refinement is known: the given value, or the library's
     // default (then lowered to what the pipeline uses, below).
     let k_process = args.k_process.unwrap_or(defaults().k_process);
@@ -269,7 +309,7 @@ pub(crate) fn params_of(args: &MatchArgs, smallest: usize) -> Result<MatchParams
     params.adjoint = args.refiner.adjoint;
     params.orient_reversing = args.mirrored;
     params.area_normalize = !args.no_area_normalize;
-    let (kind, refine) = refinement(args, smallest)?;
+    let (kind, refine) = refinement(args, sizes)?;
     params.refine = refine;
     params.starts = match args.starts.as_deref() {
         Some(text) => fmaps::pipeline::parse_starts(text)
@@ -348,7 +388,7 @@ pub(crate) fn match_cmd(args: &MatchArgs) -> Result<(), Failure> {
     let a = load(&args.source)?;
     let b = load(&args.target)?;
     let load_seconds = t.elapsed().as_secs_f64();
-    let params = params_of(args, a.n_vertices().min(b.n_vertices()))?;
+    let params = params_of(args, (a.n_vertices(), b.n_vertices()))?;
     if let Some(p) = &args.landmarks {
         // Out-of-range landmarks, named by file and line as written.
         read_landmarks(p)?
@@ -379,6 +419,15 @@ pub(crate) fn match_cmd(args: &MatchArgs) -> Result<(), Failure> {
     )?;
     let quality = fmaps::eval::map_quality(&r.t_ab, &a, &b, None).map_err(runtime)?;
     let total = t.elapsed().as_secs_f64();
+    // The sampling ZoomOut ran with, and whether it was chosen from the
+    // meshes' sizes.
+    let (samples, auto_samples) = match &params.refine {
+        fmaps::pipeline::Refinement::ZoomOut { samples, .. } => (
+            *samples,
+            args.refiner.samples(a.n_vertices(), b.n_vertices()).1,
+        ),
+        _ => (None, false),
+    };
     if args.json {
         let v = json!({
             "source": args.source.display().to_string(),
@@ -399,6 +448,7 @@ pub(crate) fn match_cmd(args: &MatchArgs) -> Result<(), Failure> {
                 "changed_per_iteration": rep.iterations.iter().map(|i| i.changed).collect::<Vec<_>>(),
                 "seconds_per_iteration": rep.iterations.iter().map(|i| i.seconds).collect::<Vec<_>>(),
             })),
+            "refine_samples": {"per_shape": samples, "automatic": auto_samples},
             "orientation": r.orientation,
             "quality": quality,
             "starts": r.starts,
@@ -466,6 +516,13 @@ pub(crate) fn match_cmd(args: &MatchArgs) -> Result<(), Failure> {
             r.t_ab.len()
         );
     }
+    if let (Some(m), true) = (samples, auto_samples) {
+        outln!(
+            o,
+            "ZoomOut iterations on {m} farthest points per shape, the final map on every vertex: chosen because a mesh has more than {} vertices (--refine-samples all: every vertex)",
+            fmaps::pipeline::AUTO_SAMPLES_ABOVE
+        );
+    }
     outln!(
         o,
         "orientation score of the map: {:.3} (1: preserved, -1: mirrored)",
@@ -515,13 +572,41 @@ mod tests {
     use crate::{Cli, Command};
 
     fn parse(extra: &[&str]) -> MatchParams {
+        parse_sized(extra, (5000, 5000))
+    }
+
+    /// [`parse`] for meshes of `sizes` vertices.
+    fn parse_sized(extra: &[&str], sizes: (usize, usize)) -> MatchParams {
         let mut argv = vec!["fmaps", "match", "a.off", "b.off"];
         argv.extend(extra);
         match Cli::try_parse_from(argv).unwrap().command {
-            Command::Match(args) => {
-                params_of(&args, usize::MAX).unwrap_or_else(|_| panic!("{extra:?}"))
-            }
+            Command::Match(args) => params_of(&args, sizes).unwrap_or_else(|_| panic!("{extra:?}")),
             _ => unreachable!("a match command"),
+        }
+    }
+
+    /// ZoomOut samples above `AUTO_SAMPLES_ABOVE` vertices in the larger
+    /// mesh unless told (`--refine-samples N|all`); other refinements
+    /// never.
+    #[test]
+    fn zoomout_samples_large_meshes_by_default() {
+        use fmaps::pipeline::{AUTO_REFINE_SAMPLES, AUTO_SAMPLES_ABOVE};
+        let samples = |extra: &[&str], sizes| match parse_sized(extra, sizes).refine {
+            Refinement::ZoomOut { samples, .. } => samples,
+            other => panic!("{other:?}"),
+        };
+        let z = ["--refine", "zoomout"];
+        let (small, large) = (AUTO_SAMPLES_ABOVE, AUTO_SAMPLES_ABOVE + 1);
+        assert_eq!(samples(&z, (small, small)), None);
+        assert_eq!(samples(&z, (5000, large)), Some(AUTO_REFINE_SAMPLES));
+        assert_eq!(samples(&z, (large, 5000)), Some(AUTO_REFINE_SAMPLES));
+        let all = ["--refine", "zoomout", "--refine-samples", "all"];
+        assert_eq!(samples(&all, (large, large)), None);
+        let n = ["--refine", "zoomout", "--refine-samples", "700"];
+        assert_eq!(samples(&n, (small, small)), Some(700));
+        for bad in ["0", "-3", "many", ""] {
+            let argv = ["fmaps", "match", "a.off", "b.off", "--refine-samples", bad];
+            assert!(Cli::try_parse_from(argv).is_err(), "{bad:?}");
         }
     }
 

@@ -40,8 +40,9 @@ pub(crate) struct RefineArgs {
     json: bool,
 }
 
-fn refinement(args: &RefineArgs) -> Result<Refinement, Failure> {
-    let options = args.refiner.options(args.k, false, false);
+/// The refinement for meshes of `sizes.0` and `sizes.1` vertices.
+fn refinement(args: &RefineArgs, sizes: (usize, usize)) -> Result<Refinement, Failure> {
+    let options = args.refiner.options(args.k, false, false, sizes);
     fmaps::pipeline::named_refinement(args.refine.kind(), &options)
         .map_err(crate::match_cmd::zoomout_failure)
 }
@@ -67,7 +68,7 @@ pub(crate) fn refine_cmd(args: &RefineArgs) -> Result<(), Failure> {
             a.n_vertices()
         )));
     }
-    let refine = refinement(args)?;
+    let refine = refinement(args, (a.n_vertices(), b.n_vertices()))?;
     let mut params = MatchParams {
         k: args.k,
         refine,

@@ -49,11 +49,14 @@ mod single;
 mod starts;
 use fit::Described;
 pub use fit::{Fit, fit_descriptors};
-use from_map::with_refiner;
-pub use from_map::{RefinedMap, refine_point_map};
+pub use from_map::{RefinedMap, SAMPLED_FULL_ITERATIONS, refine_point_map};
+use from_map::{draw_samples, with_refiner};
 pub use guards::parse_starts;
 use guards::unit_area;
-pub use named::{RefineOptions, RefinerKind, default_select_at, default_starts, named_refinement};
+pub use named::{
+    AUTO_REFINE_SAMPLES, AUTO_SAMPLES_ABOVE, RefineOptions, RefinerKind, default_refine_samples,
+    default_select_at, default_starts, named_refinement,
+};
 use single::match_described;
 use starts::multi_start;
 
@@ -705,12 +708,18 @@ pub fn match_prepared(
     // Checked and compressed once for every start.
     let described = Described::new(a, b, &da, &db, params)?;
     let seconds = t.elapsed().as_secs_f64();
-    if !params.starts.is_empty() {
-        return multi_start(a, b, &described, seconds, params);
-    }
-    let mut out = match_described(a, b, &described, params)?;
-    out.times.descriptors += seconds;
-    out.times.total += seconds;
+    let (sampled, sampling_seconds) = draw_samples(a, b, params);
+    let params = sampled.as_ref().unwrap_or(params);
+    let mut out = if params.starts.is_empty() {
+        let mut out = match_described(a, b, &described, params)?;
+        out.times.descriptors += seconds;
+        out.times.total += seconds;
+        out
+    } else {
+        multi_start(a, b, &described, seconds, params)?
+    };
+    out.times.refine += sampling_seconds;
+    out.times.total += sampling_seconds;
     Ok(out)
 }
 

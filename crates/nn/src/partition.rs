@@ -106,12 +106,7 @@ impl Partition {
     /// }
     /// ```
     pub fn for_balls(rows: MatRef<'_, f64>, min_rows: usize) -> Option<Arc<Partition>> {
-        let off = std::env::var_os("FMAPS_NO_BALLS").is_some_and(|v| !v.is_empty() && v != "0");
-        if off
-            || crate::tiles_available()
-            || rows.ncols() == 0
-            || !(min_rows..=BALLS_MAX_ROWS).contains(&rows.nrows())
-        {
+        if !Partition::balls_pay(rows.nrows(), rows.ncols(), min_rows) {
             return None;
         }
         Some(Partition::kmeans(
@@ -119,6 +114,32 @@ impl Partition {
             crate::BALL_SIZE,
             crate::KMEANS_STEPS,
         ))
+    }
+
+    /// [`for_balls`](Self::for_balls) with clusters the caller already
+    /// has (`labels`, one per row, e.g. patches of neighbouring vertices):
+    /// `Some` under the same conditions, without the k-means.
+    ///
+    /// ```
+    /// let rows = faer::Mat::<f64>::zeros(3000, 4);
+    /// let labels: Vec<u32> = (0..3000).map(|i| i / 20).collect();
+    /// if let Some(p) = fmaps_nn::Partition::for_balls_from_labels(rows.as_ref(), 1024, labels) {
+    ///     assert_eq!(p.labels()[45], 2);
+    /// }
+    /// ```
+    pub fn for_balls_from_labels(
+        rows: MatRef<'_, f64>,
+        min_rows: usize,
+        labels: Vec<u32>,
+    ) -> Option<Arc<Partition>> {
+        (labels.len() == rows.nrows() && Partition::balls_pay(rows.nrows(), rows.ncols(), min_rows))
+            .then(|| Partition::from_labels(labels))
+    }
+
+    /// The conditions of [`for_balls`](Self::for_balls).
+    fn balls_pay(n: usize, d: usize, min_rows: usize) -> bool {
+        let off = std::env::var_os("FMAPS_NO_BALLS").is_some_and(|v| !v.is_empty() && v != "0");
+        !(off || crate::tiles_available() || d == 0 || !(min_rows..=BALLS_MAX_ROWS).contains(&n))
     }
 
     /// k-means clusters of the rows of `rows` (n x d), about `size` rows

@@ -250,12 +250,14 @@ fn fortran(m: DMatrix<f64>) -> Array2<f64> {
 /// --refine`, or "default": what `fmaps match` runs without flags, the
 /// facade's [`RefinerKind::default_for`]) on the schedule `schedule`
 /// (`START:FINAL:STEP`, None: 50:150:5) where the refiner has one, from the
-/// further starts `fmaps match` uses for that refiner.
+/// further starts `fmaps match` uses for that refiner, for meshes of
+/// `n_a` and `n_b` vertices (a ZoomOut samples them as `fmaps match`
+/// does: [`fmaps::pipeline::default_refine_samples`]).
 #[allow(clippy::too_many_arguments)]
 fn params_for(
     refine: &str,
     schedule: Option<String>,
-    smallest: usize,
+    (n_a, n_b): (usize, usize),
     k: usize,
     k_process: usize,
     w_orient: Option<f64>,
@@ -273,12 +275,13 @@ fn params_for(
     if let Some(w) = w_orient {
         p.w_orient = w;
     }
-    let kind = refiner_kind(refine, smallest)?;
+    let kind = refiner_kind(refine, n_a.min(n_b))?;
     let options = RefineOptions {
         k,
         schedule,
         mirrored,
         non_isometric,
+        samples: fmaps::pipeline::default_refine_samples(n_a, n_b),
         ..RefineOptions::default()
     };
     p.refine =
@@ -365,11 +368,11 @@ fn match_shapes(
 ) -> PyResult<MatchResult> {
     let (ma, mb) = (Arc::clone(&a.inner), Arc::clone(&b.inner));
     let landmarks = stages::landmark_pairs(landmarks, ma.n_vertices(), mb.n_vertices())?;
-    let smallest = ma.n_vertices().min(mb.n_vertices());
+    let sizes = (ma.n_vertices(), mb.n_vertices());
     let mut params = params_for(
         refine,
         schedule,
-        smallest,
+        sizes,
         k,
         k_process.unwrap_or(MatchParams::default().k_process),
         w_orient,
@@ -670,11 +673,11 @@ fn match_prepared(
     }
     let k_process = a.k_process().min(b.k_process());
     let (pa, pb) = (Arc::clone(&a.inner), Arc::clone(&b.inner));
-    let smallest = pa.vertices.len().min(pb.vertices.len());
+    let sizes = (pa.vertices.len(), pb.vertices.len());
     let mut params = params_for(
         refine,
         schedule,
-        smallest,
+        sizes,
         k,
         k_process,
         w_orient,

@@ -86,7 +86,7 @@ pub use discrete::{DiscreteOp, DiscreteWeights};
 pub use icp::Icp;
 pub use orientation::{area_distortion, orientation_score};
 pub use repair::Repair;
-pub use sampling::farthest_point_sampling;
+pub use sampling::{farthest_point_sampling, farthest_point_sampling_with_nearest};
 pub use shells::{Select, SmoothShells};
 pub use zoomout::{Subsample, ZoomOut};
 

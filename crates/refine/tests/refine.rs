@@ -219,22 +219,68 @@ fn subsampled_zoomout_is_close_to_the_full_one() {
     let before = fmap_error(&p, &c);
     let base = zoomout(20, 60);
     let full = error(&p, &base.refine(&c, &p.basis_a, &p.basis_b).unwrap().t_ba);
-    let sub = Subsample {
-        a: farthest_point_sampling(p.a.vertices(), 500, 0),
-        b: farthest_point_sampling(p.b.vertices(), 500, 0),
-    };
+    let sub = Subsample::farthest(p.a.vertices(), p.b.vertices(), 500);
+    assert_eq!(sub.a, farthest_point_sampling(p.a.vertices(), 500, 0));
+    assert_eq!(sub.b, farthest_point_sampling(p.b.vertices(), 500, 0));
     let z = ZoomOut {
         subsample: Some(sub.clone()),
         ..base.clone()
     };
     let out = z.refine(&c, &p.basis_a, &p.basis_b).unwrap();
     assert_eq!(out.t_ba.len(), p.b.vertices().len());
-    // The final map (searched with guesses from the samples) is the exact
-    // conversion of the final C.
+    // The final map (searched from each vertex's nearest sample's image)
+    // is the exact conversion of the final C, as without those guesses.
     assert_eq!(
         out.t_ba,
         point_map_from_fmap(&out.c_ab, &p.basis_a, &p.basis_b).unwrap()
     );
+    let unguided = ZoomOut {
+        subsample: Some(Subsample {
+            nearest_b: Vec::new(),
+            ..sub.clone()
+        }),
+        ..base.clone()
+    }
+    .refine(&c, &p.basis_a, &p.basis_b)
+    .unwrap();
+    assert_eq!(unguided.t_ba, out.t_ba);
+    // One iteration on every vertex after the samples: the fit of the
+    // sampled run's map with B's mass, then its exact conversion.
+    let z1 = ZoomOut {
+        full_iterations: 1,
+        ..z.clone()
+    };
+    let one = z1.refine(&c, &p.basis_a, &p.basis_b).unwrap();
+    assert_eq!(one.report.iterations.len(), out.report.iterations.len() + 1);
+    assert!(
+        z1.name().ends_with("samples 500/500 + 1 on every vertex"),
+        "{}",
+        z1.name()
+    );
+    let c1 = fmap_from_point_map(&out.t_ba, &p.basis_a, &p.basis_b).unwrap();
+    assert_eq!(c1.shape(), one.c_ab.shape());
+    assert!(
+        (&c1 - &one.c_ab).amax() < 1e-9,
+        "{}",
+        (&c1 - &one.c_ab).amax()
+    );
+    assert_eq!(
+        one.t_ba,
+        point_map_from_fmap(&one.c_ab, &p.basis_a, &p.basis_b).unwrap()
+    );
+    // Nearest samples of the wrong length or out of range: errors.
+    for nearest_b in [vec![0; 3], vec![500; p.b.vertices().len()]] {
+        let err = ZoomOut {
+            subsample: Some(Subsample {
+                nearest_b,
+                ..sub.clone()
+            }),
+            ..base.clone()
+        }
+        .refine(&c, &p.basis_a, &p.basis_b)
+        .unwrap_err();
+        assert!(matches!(err, Error::InvalidParameter(_)), "{err}");
+    }
     let e = error(&p, &out.t_ba);
     assert!(
         e < 0.5 * before && e < 2.0 * full + 0.02,
@@ -244,6 +290,8 @@ fn subsampled_zoomout_is_close_to_the_full_one() {
     let few = Subsample {
         a: sub.a.clone(),
         b: sub.b[..40].to_vec(),
+        nearest_b: Vec::new(),
+        nearest_a: Vec::new(),
     };
     let err = ZoomOut {
         subsample: Some(few),
@@ -255,6 +303,8 @@ fn subsampled_zoomout_is_close_to_the_full_one() {
     let bad = Subsample {
         a: vec![0, 99_999],
         b: sub.b,
+        nearest_b: Vec::new(),
+        nearest_a: Vec::new(),
     };
     let err = ZoomOut {
         subsample: Some(bad),

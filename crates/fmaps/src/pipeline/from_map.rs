@@ -122,12 +122,47 @@ pub(super) fn with_refiner<R>(
             let mut zo = zoomout.clone();
             zo.adjoint |= adjoint;
             // The refiner's "A" is the target (see `refine_result`).
-            zo.subsample = samples.map(|m| refine::Subsample {
-                a: refine::farthest_point_sampling(&b.vertices, m, 0),
-                b: refine::farthest_point_sampling(&a.vertices, m, 0),
-            });
+            if let Some(m) = samples {
+                zo.subsample = Some(refine::Subsample::farthest(&b.vertices, &a.vertices, *m));
+                zo.full_iterations = SAMPLED_FULL_ITERATIONS;
+            }
             Some(f(&zo))
         }
         Refinement::Custom(r) => Some(f(r.as_ref())),
     }
+}
+
+/// Iterations on every vertex after a sub-sampled ZoomOut's iterations on
+/// samples ([`refine::ZoomOut::full_iterations`]) in the pipeline.
+pub const SAMPLED_FULL_ITERATIONS: usize = 1;
+
+/// A sub-sampled ZoomOut's samples, drawn once for every start: `params`
+/// with the [`refine::Subsample`] in place of `samples` (the refiner's A
+/// is the target), and the seconds it took; `None` for other refinements.
+pub(super) fn draw_samples(
+    a: &PreparedShape,
+    b: &PreparedShape,
+    params: &MatchParams,
+) -> (Option<MatchParams>, f64) {
+    let Refinement::ZoomOut {
+        zoomout,
+        samples: Some(m),
+    } = &params.refine
+    else {
+        return (None, 0.0);
+    };
+    let t = Instant::now();
+    let subsample = refine::Subsample::farthest(&b.vertices, &a.vertices, *m);
+    let p = MatchParams {
+        refine: Refinement::ZoomOut {
+            zoomout: refine::ZoomOut {
+                subsample: Some(subsample),
+                full_iterations: SAMPLED_FULL_ITERATIONS,
+                ..zoomout.clone()
+            },
+            samples: None,
+        },
+        ..params.clone()
+    };
+    (Some(p), t.elapsed().as_secs_f64())
 }

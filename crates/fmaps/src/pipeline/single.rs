@@ -8,6 +8,8 @@ use super::{
     MatchError, MatchParams, MatchResult, MatchTimes, PreparedShape, orientation_of, refine_result,
     with_refiner,
 };
+use nalgebra::DMatrix;
+
 use crate::solve;
 
 /// The pipeline from checked, compressed descriptors on (one start, size
@@ -19,6 +21,21 @@ pub(super) fn match_described(
     described: &Described<'_>,
     params: &MatchParams,
 ) -> Result<MatchResult, MatchError> {
+    let (out, _) = match_described_deferred(a, b, described, params, false)?;
+    Ok(out)
+}
+
+/// [`match_described`]; with `defer_initial_map` (for a refiner that does
+/// not start from the initial point map) that map is not computed:
+/// `t_ab_init` is left empty and the initial `C_BA` is returned for
+/// [`initial_map`], which a multi-start run calls for the kept start only.
+pub(super) fn match_described_deferred(
+    a: &PreparedShape,
+    b: &PreparedShape,
+    described: &Described<'_>,
+    params: &MatchParams,
+    defer_initial_map: bool,
+) -> Result<(MatchResult, Option<DMatrix<f64>>), MatchError> {
     let k = params.k;
     let mut times = MatchTimes::default();
     let fit = fit_described(a, b, described, params)?;
@@ -29,10 +46,10 @@ pub(super) fn match_described(
     let (sb, sa) = (b.basis.truncate(k), a.basis.truncate(k));
 
     let t = Instant::now();
-    let t_ab = if params.adjoint {
-        solve::point_map_from_fmap_adjoint(&c_ba, &sb, &sa)?
+    let (t_ab, c_init) = if defer_initial_map {
+        (Vec::new(), Some(c_ba.clone()))
     } else {
-        solve::point_map_from_fmap(&c_ba, &sb, &sa)?
+        (initial_map(&c_ba, a, b, params)?, None)
     };
     times.point_map = t.elapsed().as_secs_f64();
     times.total = times.descriptors + times.operators + times.solve + times.point_map;
@@ -55,5 +72,20 @@ pub(super) fn match_described(
         r?;
     }
     out.orientation = orientation_of(&out.t_ab, a, b)?;
-    Ok(out)
+    Ok((out, c_init))
+}
+
+/// The initial point map `T_AB` of the fit `c_ba` (size `params.k`).
+pub(super) fn initial_map(
+    c_ba: &DMatrix<f64>,
+    a: &PreparedShape,
+    b: &PreparedShape,
+    params: &MatchParams,
+) -> Result<Vec<usize>, MatchError> {
+    let (sb, sa) = (b.basis.truncate(params.k), a.basis.truncate(params.k));
+    Ok(if params.adjoint {
+        solve::point_map_from_fmap_adjoint(c_ba, &sb, &sa)?
+    } else {
+        solve::point_map_from_fmap(c_ba, &sb, &sa)?
+    })
 }

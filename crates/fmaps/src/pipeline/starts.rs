@@ -5,12 +5,14 @@ use std::sync::Arc;
 use std::time::Instant;
 
 use fmaps_mesh_io::TriMesh;
+use nalgebra::DMatrix;
 use rayon::prelude::*;
 
 use super::fit::Described;
+use super::single::{initial_map, match_described_deferred};
 use super::{
     MatchError, MatchParams, MatchResult, MatchTimes, PreparedShape, Refinement, Start,
-    StartSelection, match_described, orientation_of, refine_result, with_refiner,
+    StartSelection, orientation_of, refine_result, with_refiner,
 };
 use crate::refine;
 
@@ -50,7 +52,11 @@ pub(super) fn multi_start(
     // A ZoomOut may stop every start at `select_at`: the kept one then
     // goes on alone.
     let stop = params.starts_stop();
-    let run = |k: usize| -> Result<MatchResult, MatchError> {
+    // A sub-sampled ZoomOut does not start from the initial point map: it
+    // is computed for the kept start only (one full-size search instead
+    // of one per start).
+    let defer = matches!(&params.refine, Refinement::ZoomOut { zoomout, .. } if zoomout.subsample.is_some());
+    let run = |k: usize| -> Result<(MatchResult, Option<DMatrix<f64>>), MatchError> {
         let mut p = MatchParams {
             k,
             starts: Vec::new(),
@@ -62,6 +68,8 @@ pub(super) fn multi_start(
                 if let Some(s) = stop {
                     zoomout.k_final = s;
                     zoomout.k_start = zoomout.k_start.min(s);
+                    // The starts' maps at the stop are only scored.
+                    zoomout.full_iterations = 0;
                 }
             }
             Refinement::Custom(r) => {
@@ -71,7 +79,7 @@ pub(super) fn multi_start(
             }
             _ => {}
         }
-        match_described(a, b, described, &p)
+        match_described_deferred(a, b, described, &p, defer)
     };
     let wall = Instant::now();
     let mut results = Vec::with_capacity(sizes.len());
@@ -79,15 +87,14 @@ pub(super) fn multi_start(
         // The first start alone (it may be enough), then the others.
         Some(t) => {
             let r = run(sizes[0])?;
-            let enough = sign * r.orientation >= t;
+            let enough = sign * r.0.orientation >= t;
             results.push(r);
             if enough { sizes.len() } else { 1 }
         }
         None => 0,
     };
     // In parallel (a start's result does not depend on the threads).
-    let rest: Vec<Result<MatchResult, MatchError>> =
-        sizes[first..].par_iter().map(|&k| run(k)).collect();
+    let rest: Vec<Result<_, MatchError>> = sizes[first..].par_iter().map(|&k| run(k)).collect();
     for r in rest {
         results.push(r?);
     }
@@ -96,7 +103,8 @@ pub(super) fn multi_start(
         ..MatchTimes::default()
     };
     let mut starts = Vec::with_capacity(results.len());
-    let mut best: Option<(usize, f64, MatchResult)> = None;
+    type Best = (usize, f64, MatchResult, Option<DMatrix<f64>>);
+    let mut best: Option<Best> = None;
     let mesh = |s: &PreparedShape| TriMesh::new(s.vertices.clone(), s.faces.clone());
     let (mesh_a, mesh_b) = (
         mesh(a).map_err(|e| MatchError::InvalidShape {
@@ -108,7 +116,7 @@ pub(super) fn multi_start(
             message: e.to_string(),
         })?,
     );
-    for (k, r) in sizes.iter().zip(results) {
+    for (k, (r, c_init)) in sizes.iter().zip(results) {
         for (acc, x) in [
             (&mut times.descriptors, r.times.descriptors),
             (&mut times.operators, r.times.operators),
@@ -133,11 +141,22 @@ pub(super) fn multi_start(
             StartSelection::Conformal => quality.conformal_distortion,
             StartSelection::Area => quality.area_distortion,
         };
-        if best.as_ref().is_none_or(|(_, b, _)| score < *b) {
-            best = Some((starts.len() - 1, score, r));
+        if best.as_ref().is_none_or(|(_, b, _, _)| score < *b) {
+            best = Some((starts.len() - 1, score, r, c_init));
         }
     }
-    let (chosen, _, mut out) = best.expect("at least one start");
+    let (chosen, _, mut out, c_init) = best.expect("at least one start");
+    if let Some(c) = c_init {
+        let t = Instant::now();
+        let p = MatchParams {
+            k: sizes[chosen],
+            ..params.clone()
+        };
+        out.t_ab_init = initial_map(&c, a, b, &p)?;
+        let s = t.elapsed().as_secs_f64();
+        out.times.point_map += s;
+        times.point_map += s;
+    }
     if let (Some(s), Refinement::ZoomOut { zoomout, samples }) = (stop, &params.refine) {
         // The kept start's ZoomOut from `s` on, from its map and its
         // s x s fit: the rest of the schedule (the same iterations as
