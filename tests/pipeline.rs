@@ -465,3 +465,58 @@ fn multi_start_with_a_discrete_refiner() {
         pair.truth.len()
     );
 }
+
+/// A ZoomOut on farthest-point samples (as `fmaps match` runs on large
+/// meshes): the samples are drawn once for every start, the initial map
+/// (searched from the samples' map over the target's sample cells) is the
+/// plain conversion of the same fit, and the final map is the exact
+/// conversion of the final C (after the iteration on every vertex).
+#[test]
+fn sampled_zoomout_maps_are_exact_conversions() {
+    let (v, f) = icosphere(1.0, 4).into_parts();
+    let a = TriMesh::new(
+        v.iter()
+            .map(|p| [1.3 * p[0], p[1] * (1.0 + 0.2 * p[0]), 0.8 * p[2]])
+            .collect(),
+        f,
+    )
+    .unwrap();
+    let b = bent(&a, 0.15);
+    let mut zoomout = fmaps::refine::ZoomOut::default();
+    (zoomout.k_start, zoomout.k_final, zoomout.step) = (20, 40, 4);
+    let sampled = MatchParams {
+        refine: Refinement::ZoomOut {
+            zoomout,
+            samples: Some(600),
+        },
+        starts: vec![8, 12],
+        select_at: Some(28),
+        ..small_params()
+    };
+    let r = match_shapes(&a, &b, &sampled).unwrap();
+    let rep = r.refine.as_ref().unwrap();
+    assert!(
+        rep.method.contains("samples 600/600 + 1 on every vertex"),
+        "{}",
+        rep.method
+    );
+    let kept = r.starts.iter().find(|s| s.chosen).unwrap();
+    // The initial map of the kept start: the fit does not depend on the
+    // refinement.
+    let plain = MatchParams {
+        k: kept.k,
+        refine: Refinement::None,
+        starts: Vec::new(),
+        select_at: None,
+        ..sampled.clone()
+    };
+    assert_eq!(r.t_ab_init, match_shapes(&a, &b, &plain).unwrap().t_ab_init);
+    let (pa, pb) = (
+        fmaps::pipeline::prepare(&a, &sampled).unwrap(),
+        fmaps::pipeline::prepare(&b, &sampled).unwrap(),
+    );
+    let exact =
+        fmaps::solve::point_map_from_fmap(&r.c_ba, &pb.basis.truncate(40), &pa.basis.truncate(40))
+            .unwrap();
+    assert_eq!(r.t_ab, exact);
+}

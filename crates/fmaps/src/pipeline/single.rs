@@ -5,8 +5,8 @@ use std::time::Instant;
 
 use super::fit::{Described, fit_described};
 use super::{
-    MatchError, MatchParams, MatchResult, MatchTimes, PreparedShape, orientation_of, refine_result,
-    with_refiner,
+    MatchError, MatchParams, MatchResult, MatchTimes, PreparedShape, Refinement, orientation_of,
+    refine_result, with_refiner,
 };
 use nalgebra::DMatrix;
 
@@ -76,12 +76,53 @@ pub(super) fn match_described_deferred(
 }
 
 /// The initial point map `T_AB` of the fit `c_ba` (size `params.k`).
+/// With a sub-sampled ZoomOut's samples, the search bounds the target's
+/// sample cells by balls (patches of ~n/samples neighbouring vertices,
+/// free where the default k-means clusters of a large shape's rows take
+/// about as long as the search; the same exact nearest neighbours).
 pub(super) fn initial_map(
     c_ba: &DMatrix<f64>,
     a: &PreparedShape,
     b: &PreparedShape,
     params: &MatchParams,
 ) -> Result<Vec<usize>, MatchError> {
+    use crate::nn::{NnParams, NnStrategy, Partition};
+    use crate::solve::convert::{BasisRows, Conversion, point_map};
+    let k = params.k;
+    if let Refinement::ZoomOut { zoomout, .. } = &params.refine
+        && let Some(s) = &zoomout.subsample
+        && s.nearest_a.len() == b.basis.n()
+        && s.nearest_b.len() == a.basis.n()
+        && c_ba.shape() == (k, k)
+    {
+        // The refiner's A is the target.
+        let (rows_b, rows_a) = (BasisRows::new(&b.basis, k), BasisRows::new(&a.basis, k));
+        let labels = s.nearest_a.iter().map(|&j| j as u32).collect();
+        if let Some(p) = Partition::for_balls_from_labels(rows_b.view(k), 1024, labels) {
+            let conversion = if params.adjoint {
+                Conversion::Adjoint
+            } else {
+                Conversion::Direct
+            };
+            // Guesses: the map of the samples (a small search), each
+            // vertex starting from its nearest sample's image.
+            let (sb, sa) = (
+                BasisRows::at_vertices(&b.basis, k, &s.a)?,
+                BasisRows::at_vertices(&a.basis, k, &s.b)?,
+            );
+            let on_samples = point_map(c_ba, &sb, &sa, conversion, None, &NnParams::default())?;
+            let guesses: Vec<usize> = s.nearest_b.iter().map(|&j| s.a[on_samples[j]]).collect();
+            let nn = NnParams::with_strategy(NnStrategy::Balls).with_partition(p);
+            return Ok(point_map(
+                c_ba,
+                &rows_b,
+                &rows_a,
+                conversion,
+                Some(&guesses),
+                &nn,
+            )?);
+        }
+    }
     let (sb, sa) = (b.basis.truncate(params.k), a.basis.truncate(params.k));
     Ok(if params.adjoint {
         solve::point_map_from_fmap_adjoint(c_ba, &sb, &sa)?
