@@ -88,7 +88,7 @@ use std::sync::OnceLock;
 use balls::BallData;
 pub use balls::{BALL_SIZE, KMEANS_STEPS, Partition};
 use brute::{BruteData, FUSED_MAX_DIM, brute_search, max_abs, power_of_two_scale, scale_for};
-pub use partition::{BALLS_MAX_ROWS, cluster_columns};
+pub use partition::{BALLS_MAX_ROWS, cluster_columns, coarse_ball_size};
 use prefix::{PREFIX_FROM, PREFIX_MAX_ROWS, PrefixData, prefix_search};
 use rows::Rows;
 use std::sync::Arc;

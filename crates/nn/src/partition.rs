@@ -83,6 +83,25 @@ pub fn cluster_columns(d: usize) -> usize {
     (d / 2).max(d.min(64))
 }
 
+/// Rows per ball for one search of about `n` queries among `n` rows
+/// without guesses or with weak ones (an initial conversion, the first
+/// full-size search after iterations on samples): about `√(n/5)`, at least
+/// [`BALL_SIZE`](crate::BALL_SIZE). That balances a query's comparisons
+/// with the n / size centres against the rows of the ~5 balls it opens
+/// (README: on FAUST's 80k pair, 126 rows per ball make the initial point
+/// map and the final search of a sampled ZoomOut about twice as fast as
+/// 24, the same maps). Searches with the previous iteration's map as
+/// guesses open fewer balls and keep [`BALL_SIZE`](crate::BALL_SIZE)
+/// (larger balls were slower there).
+///
+/// ```
+/// assert_eq!(fmaps_nn::coarse_ball_size(80_000), 126);
+/// assert_eq!(fmaps_nn::coarse_ball_size(1000), fmaps_nn::BALL_SIZE);
+/// ```
+pub fn coarse_ball_size(n: usize) -> usize {
+    ((n as f64 / 5.0).sqrt().round() as usize).max(crate::BALL_SIZE)
+}
+
 impl Partition {
     /// The default clusters for searching the rows `rows` (n x d) or any
     /// linear image of them with the ball search, when that is the
@@ -112,6 +131,27 @@ impl Partition {
         Some(Partition::kmeans(
             rows.subcols(0, cluster_columns(rows.ncols())),
             crate::BALL_SIZE,
+            crate::KMEANS_STEPS,
+        ))
+    }
+
+    /// [`for_balls`](Self::for_balls) for one search of about as many
+    /// queries as rows without guesses (a single conversion): clusters of
+    /// [`coarse_ball_size`] rows.
+    ///
+    /// ```
+    /// let rows = faer::Mat::<f64>::from_fn(3000, 4, |i, j| ((i * (j + 1)) as f64).sin());
+    /// if let Some(p) = fmaps_nn::Partition::for_one_search(rows.as_ref(), 1024) {
+    ///     assert_eq!(p.len(), 3000);
+    /// }
+    /// ```
+    pub fn for_one_search(rows: MatRef<'_, f64>, min_rows: usize) -> Option<Arc<Partition>> {
+        if !Partition::balls_pay(rows.nrows(), rows.ncols(), min_rows) {
+            return None;
+        }
+        Some(Partition::kmeans(
+            rows.subcols(0, cluster_columns(rows.ncols())),
+            coarse_ball_size(rows.nrows()),
             crate::KMEANS_STEPS,
         ))
     }

@@ -35,8 +35,22 @@ pub struct Subsample {
     /// For every vertex of A, the position in `a` of a nearby sample, or
     /// empty. Where the final search bounds clusters of A's rows by balls,
     /// these patches are its clusters (else k-means clusters of the rows
-    /// are computed).
+    /// are computed). [`Subsample::farthest`] gives each vertex's nearest
+    /// among the first [`search_cells`] samples.
     pub nearest_a: Vec<usize>,
+}
+
+/// Clusters for the full-size search among the `n` rows of a shape after
+/// iterations on samples: `n /` [`fmaps_nn::coarse_ball_size`]`(n)`
+/// (rows per cluster about `√(n/5)`): on FAUST's 80k pair, 635 cells of
+/// ~126 rows, which search faster than the 5000 samples' cells of ~16
+/// (README, "Large meshes are sampled by default").
+///
+/// ```
+/// assert_eq!(fmaps_refine::search_cells(80_000), 635);
+/// ```
+pub fn search_cells(n: usize) -> usize {
+    n.div_ceil(fmaps_nn::coarse_ball_size(n)).max(1)
 }
 
 impl Subsample {
@@ -56,6 +70,14 @@ impl Subsample {
             || crate::farthest_point_sampling_with_nearest(vertices_a, n, 0),
             || crate::farthest_point_sampling_with_nearest(vertices_b, n, 0),
         );
+        // The search's clusters: the cells of the first samples (a
+        // coarser farthest point sampling of A, the prefix of `a`).
+        let cells = search_cells(vertices_a.len());
+        let nearest_a = if cells < a.len() {
+            crate::farthest_point_sampling_with_nearest(vertices_a, cells, 0).1
+        } else {
+            nearest_a
+        };
         Subsample {
             a,
             b,

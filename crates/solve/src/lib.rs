@@ -148,10 +148,11 @@ fn convert_once(
     let (kb, ka) = check_fmap(c_ab, basis_a, basis_b)?;
     let (rows_a, rows_b) = (BasisRows::new(basis_a, ka), BasisRows::new(basis_b, kb));
     // On large shapes without matrix tiles, the ball search (exact) over
-    // k-means clusters of A's rows: the searched rows (`Φ_A Cᵀ` or `Φ_A`)
-    // are a linear image of them, and a search without guesses otherwise
+    // k-means clusters of A's rows, sized for one search without guesses
+    // (`coarse_ball_size`): the searched rows (`Φ_A Cᵀ` or `Φ_A`) are a
+    // linear image of them, and a search without guesses otherwise
     // compares most pairs (README: the 80k initial point map).
-    let params = match fmaps_nn::Partition::for_balls(rows_a.view(ka), BALLS_FROM_ROWS) {
+    let params = match fmaps_nn::Partition::for_one_search(rows_a.view(ka), BALLS_FROM_ROWS) {
         Some(p) => fmaps_nn::NnParams::with_strategy(fmaps_nn::NnStrategy::Balls).with_partition(p),
         None => fmaps_nn::NnParams::default(),
     };
