@@ -100,7 +100,9 @@ def match_shapes(
     "none", "icp", "zoomout", "bijective-zoomout", "discrete", "bcicp", "smooth-shells"; schedule: "START:FINAL:STEP"
     for ZoomOut and the discrete presets; landmarks: (vertex of A, vertex of B) pairs, 0-based; starts: further initial sizes ([] = one start; None = the CLI's default);
     k_process: eigenpairs computed (None: those the pipeline uses, as the CLI: 200 for Smooth Shells, 150 for ZoomOut);
-    non_isometric: the shapes are not near-isometric (different people or animals), as `fmaps match --non-isometric`."""
+    non_isometric: the shapes are not near-isometric (different people or animals), as `fmaps match --non-isometric`.
+    As the CLI, a ZoomOut runs its iterations on 5000 farthest points per shape when a mesh has more than 20000
+    vertices (then one iteration and the final map on every vertex; the result's refiner name says so)."""
 
 def prepare(
     mesh: Mesh, *, k_process: int = 200, area_normalize: bool = True, threads: Optional[int] = None
