@@ -86,10 +86,27 @@ impl Subsample {
         }
     }
 
+    /// The clusters of A's rows `rows_a` (one per vertex of A) for a
+    /// full-size ball search: the cells of `nearest_a`, where the ball
+    /// search pays ([`fmaps_nn::Partition::for_balls_from_labels`]);
+    /// `None` without `nearest_a` or where another search is faster.
+    pub fn cells_of_a(
+        &self,
+        rows_a: faer::MatRef<'_, f64>,
+    ) -> Option<std::sync::Arc<fmaps_nn::Partition>> {
+        if self.nearest_a.len() != rows_a.nrows() {
+            return None;
+        }
+        // (Positions among the samples: below u32::MAX wherever the ball
+        // search pays.)
+        let labels = self.nearest_a.iter().map(|&j| j as u32).collect();
+        fmaps_nn::Partition::for_balls_from_labels(rows_a, BALLS_MIN_ROWS, labels)
+    }
+
     /// The guesses of the full-size search: for every vertex of B, the
     /// vertex of A its nearest sample maps to under `t_samples` (positions
     /// in `a`, one per sample of B); `None` without `nearest_b`.
-    fn guesses(&self, t_samples: &[usize]) -> Option<Vec<usize>> {
+    pub fn guesses(&self, t_samples: &[usize]) -> Option<Vec<usize>> {
         (!self.nearest_b.is_empty()).then(|| {
             self.nearest_b
                 .iter()
@@ -477,14 +494,8 @@ impl ZoomOut {
             // search, from each vertex's nearest sample's image.
             let partition = match (&self.sinkhorn, sub) {
                 (Some(_), _) => None,
-                (None, Some(s))
-                    if s.nearest_a.len() == basis_a.n() && s.a.len() <= u32::MAX as usize =>
-                {
-                    fmaps_nn::Partition::for_balls_from_labels(
-                        all_a.view(all_a.k()),
-                        BALLS_MIN_ROWS,
-                        s.nearest_a.iter().map(|&j| j as u32).collect(),
-                    )
+                (None, Some(s)) if s.nearest_a.len() == basis_a.n() => {
+                    s.cells_of_a(all_a.view(all_a.k()))
                 }
                 (None, _) => balls_partition(&all_a),
             };

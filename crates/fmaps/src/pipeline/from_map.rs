@@ -123,8 +123,7 @@ pub(super) fn with_refiner<R>(
             zo.adjoint |= adjoint;
             // The refiner's "A" is the target (see `refine_result`).
             if let Some(m) = samples {
-                zo.subsample = Some(refine::Subsample::farthest(&b.vertices, &a.vertices, *m));
-                zo.full_iterations = SAMPLED_FULL_ITERATIONS;
+                zo = sampled(zo, a, b, *m);
             }
             Some(f(&zo))
         }
@@ -152,17 +151,28 @@ pub(super) fn draw_samples(
         return (None, 0.0);
     };
     let t = Instant::now();
-    let subsample = refine::Subsample::farthest(&b.vertices, &a.vertices, *m);
     let p = MatchParams {
         refine: Refinement::ZoomOut {
-            zoomout: refine::ZoomOut {
-                subsample: Some(subsample),
-                full_iterations: SAMPLED_FULL_ITERATIONS,
-                ..zoomout.clone()
-            },
+            zoomout: sampled(zoomout.clone(), a, b, *m),
             samples: None,
         },
         ..params.clone()
     };
     (Some(p), t.elapsed().as_secs_f64())
+}
+
+/// `zoomout` on `m` farthest points per shape of the pair (`a`, `b`), as
+/// the pipeline runs it (the refiner's A is the target; then
+/// [`SAMPLED_FULL_ITERATIONS`] on every vertex).
+fn sampled(
+    zoomout: refine::ZoomOut,
+    a: &PreparedShape,
+    b: &PreparedShape,
+    m: usize,
+) -> refine::ZoomOut {
+    refine::ZoomOut {
+        subsample: Some(refine::Subsample::farthest(&b.vertices, &a.vertices, m)),
+        full_iterations: SAMPLED_FULL_ITERATIONS,
+        ..zoomout
+    }
 }

@@ -75,55 +75,52 @@ pub(super) fn match_described_deferred(
     Ok((out, c_init))
 }
 
-/// The initial point map `T_AB` of the fit `c_ba` (size `params.k`).
+/// The initial point map `T_AB` of the fit `c_ba` (k x k).
 /// With a sub-sampled ZoomOut's samples, the search bounds the target's
-/// sample cells by balls (patches of ~n/samples neighbouring vertices,
-/// free where the default k-means clusters of a large shape's rows take
-/// about as long as the search; the same exact nearest neighbours).
+/// sample cells by balls (free where the default k-means clusters of a
+/// large shape's rows take about as long as the search) and starts each
+/// vertex from its nearest sample's image under the samples' map (a small
+/// search): the same exact nearest neighbours.
 pub(super) fn initial_map(
     c_ba: &DMatrix<f64>,
     a: &PreparedShape,
     b: &PreparedShape,
     params: &MatchParams,
 ) -> Result<Vec<usize>, MatchError> {
-    use crate::nn::{NnParams, NnStrategy, Partition};
+    use crate::nn::{NnParams, NnStrategy};
     use crate::solve::convert::{BasisRows, Conversion, point_map};
-    let k = params.k;
+    let k = c_ba.ncols();
     if let Refinement::ZoomOut { zoomout, .. } = &params.refine
         && let Some(s) = &zoomout.subsample
-        && s.nearest_a.len() == b.basis.n()
         && s.nearest_b.len() == a.basis.n()
-        && c_ba.shape() == (k, k)
     {
         // The refiner's A is the target.
-        let (rows_b, rows_a) = (BasisRows::new(&b.basis, k), BasisRows::new(&a.basis, k));
-        let labels = s.nearest_a.iter().map(|&j| j as u32).collect();
-        if let Some(p) = Partition::for_balls_from_labels(rows_b.view(k), 1024, labels) {
+        let rows_b = BasisRows::new(&b.basis, k);
+        if let Some(p) = s.cells_of_a(rows_b.view(k)) {
             let conversion = if params.adjoint {
                 Conversion::Adjoint
             } else {
                 Conversion::Direct
             };
-            // Guesses: the map of the samples (a small search), each
-            // vertex starting from its nearest sample's image.
             let (sb, sa) = (
                 BasisRows::at_vertices(&b.basis, k, &s.a)?,
                 BasisRows::at_vertices(&a.basis, k, &s.b)?,
             );
             let on_samples = point_map(c_ba, &sb, &sa, conversion, None, &NnParams::default())?;
-            let guesses: Vec<usize> = s.nearest_b.iter().map(|&j| s.a[on_samples[j]]).collect();
+            let rows_a = BasisRows::new(&a.basis, k);
             let nn = NnParams::with_strategy(NnStrategy::Balls).with_partition(p);
+            let guesses = s.guesses(&on_samples);
             return Ok(point_map(
                 c_ba,
                 &rows_b,
                 &rows_a,
                 conversion,
-                Some(&guesses),
+                guesses.as_deref(),
                 &nn,
             )?);
         }
     }
-    let (sb, sa) = (b.basis.truncate(params.k), a.basis.truncate(params.k));
+    let (sb, sa) = (b.basis.truncate(k), a.basis.truncate(k));
     Ok(if params.adjoint {
         solve::point_map_from_fmap_adjoint(c_ba, &sb, &sa)?
     } else {

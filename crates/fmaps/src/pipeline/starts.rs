@@ -148,11 +148,7 @@ pub(super) fn multi_start(
     let (chosen, _, mut out, c_init) = best.expect("at least one start");
     if let Some(c) = c_init {
         let t = Instant::now();
-        let p = MatchParams {
-            k: sizes[chosen],
-            ..params.clone()
-        };
-        out.t_ab_init = initial_map(&c, a, b, &p)?;
+        out.t_ab_init = initial_map(&c, a, b, params)?;
         let s = t.elapsed().as_secs_f64();
         out.times.point_map += s;
         times.point_map += s;
