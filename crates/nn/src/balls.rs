@@ -114,53 +114,6 @@ pub(crate) struct BallData {
 /// bent by curvature into a few more.
 pub(crate) const TANGENT: usize = 4;
 
-/// Up to [`TANGENT`] orthonormal directions (row-major into `u`, which is
-/// zeroed first) spanning most of the rows `e` (centred, row-major, `d`
-/// wide): greedy pivoted Gram–Schmidt (the row with the largest residual,
-/// normalised, orthogonalised twice against the directions before it,
-/// then removed from every residual). The residuals' squared norms are
-/// downdated (`|r − a w|² = |r|² − a²`), which only guides the choice of
-/// the next row; a row whose residual is below 1e-12 of the largest row's
-/// norm² gives no direction.
-fn tangent_basis(e: &[f64], d: usize, u: &mut [f64]) {
-    u.fill(0.0);
-    let mut res = e.to_vec();
-    let mut norms: Vec<f64> = e.chunks_exact(d).map(|r| dot(r, r)).collect();
-    let scale = norms.iter().copied().fold(0.0f64, f64::max);
-    for i in 0..TANGENT {
-        let (mut arg, mut big) = (usize::MAX, 1e-12 * scale);
-        for (r, &n) in norms.iter().enumerate() {
-            if n > big {
-                (arg, big) = (r, n);
-            }
-        }
-        if arg == usize::MAX {
-            break;
-        }
-        let mut w = res[arg * d..(arg + 1) * d].to_vec();
-        for _ in 0..2 {
-            for k in 0..i {
-                let uk = &u[k * d..(k + 1) * d];
-                let a = dot(uk, &w);
-                w.iter_mut().zip(uk).for_each(|(w, u)| *w -= a * u);
-            }
-        }
-        let n = dot(&w, &w).sqrt();
-        if !(n > 0.0) {
-            break;
-        }
-        w.iter_mut().for_each(|v| *v /= n);
-        if i + 1 < TANGENT {
-            for (row, nr) in res.chunks_exact_mut(d).zip(norms.iter_mut()) {
-                let a = dot(row, &w);
-                row.iter_mut().zip(&w).for_each(|(r, w)| *r -= a * w);
-                *nr -= a * a;
-            }
-        }
-        u[i * d..(i + 1) * d].copy_from_slice(&w);
-    }
-}
-
 /// `max(a, b)` for numbers that are not NaN (a compare and a select,
 /// which vectorize, where `f64::max` also handles NaN).
 #[inline(always)]
@@ -206,97 +159,19 @@ impl BallData {
         for (p, &i) in order.iter().enumerate() {
             pos_of[i] = p as u32;
         }
-        let m = ranges.len();
-        let mut centers = vec![0.0; m * d];
-        let mut radii = vec![0.0; m];
-        let mut to_center = vec![0.0; nx];
-        let sl = slack(d);
-        for (c, &(start, len)) in ranges.iter().enumerate() {
-            let mean = &mut centers[c * d..(c + 1) * d];
-            for row in x_ord[start * d..(start + len) * d].chunks_exact(d) {
-                mean.iter_mut().zip(row).for_each(|(m, x)| *m += x);
-            }
-            mean.iter_mut().for_each(|v| *v /= len as f64);
-            let mut r2 = 0.0f64;
-            for (t, row) in x_ord[start * d..(start + len) * d]
-                .chunks_exact(d)
-                .enumerate()
-            {
-                let e = dist2(row, mean);
-                to_center[start + t] = e.sqrt();
-                r2 = r2.max(e);
-            }
-            radii[c] = r2.sqrt() * (1.0 + sl) + f64::MIN_POSITIVE;
-        }
-        // Tangent boxes.
-        let mut tangent = vec![0.0; m * TANGENT * d];
-        let mut box_lo = vec![0.0; m * TANGENT];
-        let mut box_hi = vec![0.0; m * TANGENT];
-        let mut r_perp = vec![0.0; m];
-        let mut row_tan = vec![0.0; nx * TANGENT];
-        let mut row_perp = vec![0.0; nx];
-        let mut uc = vec![0.0; m * TANGENT];
-        let mut eta = 0.0f64;
-        let mut e = Vec::new();
-        for (c, &(start, len)) in ranges.iter().enumerate() {
-            let mean = &centers[c * d..(c + 1) * d];
-            e.clear();
-            for row in x_ord[start * d..(start + len) * d].chunks_exact(d) {
-                e.extend(row.iter().zip(mean).map(|(x, m)| x - m));
-            }
-            let u = &mut tangent[c * TANGENT * d..(c + 1) * TANGENT * d];
-            tangent_basis(&e, d, u);
-            // ‖UUᵀ − I‖ ≤ its Frobenius norm (plus a margin for its own
-            // rounding).
-            let mut f = 0.0;
-            for i in 0..TANGENT {
-                for k in 0..TANGENT {
-                    let g = dot(&u[i * d..(i + 1) * d], &u[k * d..(k + 1) * d]);
-                    let want = if i == k && u[i * d..(i + 1) * d].iter().any(|&v| v != 0.0) {
-                        1.0
-                    } else {
-                        0.0
-                    };
-                    f += (g - want) * (g - want);
-                }
-            }
-            // (The query-time bounds use 1 − η ≤ 1/(1 + η) and 1 + 2η ≥
-            // 1/(1 − η), true for η ≤ 1/2: a ball whose directions are
-            // that far from orthonormal gets none.)
-            if f.sqrt() + 1e-14 > 0.25 {
-                u.fill(0.0);
-                f = 0.0;
-            }
-            eta = eta.max(f.sqrt() + 1e-14);
-            let r = radii[c];
-            let (lo, hi) = (
-                &mut box_lo[c * TANGENT..(c + 1) * TANGENT],
-                &mut box_hi[c * TANGENT..(c + 1) * TANGENT],
-            );
-            lo.fill(f64::INFINITY);
-            hi.fill(f64::NEG_INFINITY);
-            let mut perp2 = 0.0f64;
-            for (k, row) in e.chunks_exact(d).enumerate() {
-                let mut a2 = 0.0;
-                for i in 0..TANGENT {
-                    let a = dot(&u[i * d..(i + 1) * d], row);
-                    lo[i] = lo[i].min(a);
-                    hi[i] = hi[i].max(a);
-                    row_tan[i * nx + start + k] = a;
-                    a2 += a * a;
-                }
-                let p2 = dot(row, row) * (1.0 + sl) - a2 * (1.0 - sl) / (1.0 + eta);
-                row_perp[start + k] = (p2.max(0.0) + sl * r * r).sqrt() * (1.0 + sl);
-                perp2 = perp2.max(p2);
-            }
-            // Outwards by the coordinates' rounding (at most sl r).
-            lo.iter_mut().for_each(|v| *v -= sl * r);
-            hi.iter_mut().for_each(|v| *v += sl * r);
-            r_perp[c] = (perp2.max(0.0) + sl * r * r).sqrt() * (1.0 + sl);
-            for i in 0..TANGENT {
-                uc[c * TANGENT + i] = dot(&u[i * d..(i + 1) * d], mean);
-            }
-        }
+        let Geometry {
+            centers,
+            radii,
+            to_center,
+            tangent,
+            box_lo,
+            box_hi,
+            r_perp,
+            row_tan,
+            row_perp,
+            uc,
+            eta,
+        } = geometry(&x_ord, d, &ranges);
         let mut ball_of = vec![0u32; nx];
         for (b, &(start, len)) in ranges.iter().enumerate() {
             for &i in &order[start..start + len] {
@@ -439,6 +314,187 @@ impl BallData {
     }
 }
 
+/// The per-ball geometry of [`BallData`] (see its fields).
+struct Geometry {
+    centers: Vec<f64>,
+    radii: Vec<f64>,
+    to_center: Vec<f64>,
+    tangent: Vec<f64>,
+    box_lo: Vec<f64>,
+    box_hi: Vec<f64>,
+    r_perp: Vec<f64>,
+    row_tan: Vec<f64>,
+    row_perp: Vec<f64>,
+    uc: Vec<f64>,
+    eta: f64,
+}
+
+crate::cpu::dispatched! {
+    /// Each ball's centre, radius and tangent box, and each row's distance
+    /// to its centre and coordinates, of the rows `x_ord` (row-major, `d`
+    /// wide, in ball order; ball `b` is `ranges[b]`).
+    fn geometry(x_ord: &[f64], d: usize, ranges: &[(usize, usize)]) -> Geometry {
+            let (m, nx) = (ranges.len(), x_ord.len() / d.max(1));
+            let sl = slack(d);
+            let mut centers = vec![0.0; m * d];
+            let mut radii = vec![0.0; m];
+            let mut to_center = vec![0.0; nx];
+            let mut tangent = vec![0.0; m * TANGENT * d];
+            let mut box_lo = vec![0.0; m * TANGENT];
+            let mut box_hi = vec![0.0; m * TANGENT];
+            let mut r_perp = vec![0.0; m];
+            let mut row_tan = vec![0.0; nx * TANGENT];
+            let mut row_perp = vec![0.0; nx];
+            let mut uc = vec![0.0; m * TANGENT];
+            let mut eta = 0.0f64;
+            // Per ball: its rows less the mean, their squared norms, and
+            // what the directions leave of them.
+            let (mut e, mut n0, mut res) = (Vec::new(), Vec::new(), Vec::new());
+            for (c, &(start, len)) in ranges.iter().enumerate() {
+                let rows = &x_ord[start * d..(start + len) * d];
+                let mean = &mut centers[c * d..(c + 1) * d];
+                for row in rows.chunks_exact(d) {
+                    for (m, x) in mean.iter_mut().zip(row) {
+                        *m += x;
+                    }
+                }
+                for v in mean.iter_mut() {
+                    *v /= len as f64;
+                }
+                let mean = &centers[c * d..(c + 1) * d];
+                e.clear();
+                n0.clear();
+                for row in rows.chunks_exact(d) {
+                    let at = e.len();
+                    e.extend(row.iter().zip(mean).map(|(x, m)| x - m));
+                    n0.push(dot(&e[at..], &e[at..]));
+                }
+                let mut r2 = 0.0f64;
+                for (t, &v) in n0.iter().enumerate() {
+                    to_center[start + t] = v.sqrt();
+                    r2 = r2.max(v);
+                }
+                let r = r2.sqrt() * (1.0 + sl) + f64::MIN_POSITIVE;
+                radii[c] = r;
+                // The directions: greedy pivoted Gram–Schmidt (the row
+                // farthest from the span so far, orthogonalised twice
+                // against the directions before it, normalised). Each
+                // row's coordinate along a new direction is computed once,
+                // as the coordinate the bounds use and to downdate what
+                // the span leaves of the row (`|r|² − a²`, which only
+                // guides the next choice); a row left below 1e-12 of the
+                // largest norm² gives no direction.
+                let u = &mut tangent[c * TANGENT * d..(c + 1) * TANGENT * d];
+                res.clear();
+                res.extend_from_slice(&n0);
+                let floor = 1e-12 * r2;
+                for i in 0..TANGENT {
+                    let (mut arg, mut big) = (usize::MAX, floor);
+                    for (t, &v) in res.iter().enumerate() {
+                        if v > big {
+                            (arg, big) = (t, v);
+                        }
+                    }
+                    if arg == usize::MAX {
+                        break;
+                    }
+                    let (done, rest) = u.split_at_mut(i * d);
+                    let w = &mut rest[..d];
+                    w.copy_from_slice(&e[arg * d..(arg + 1) * d]);
+                    for _ in 0..2 {
+                        for k in 0..i {
+                            let uk = &done[k * d..(k + 1) * d];
+                            let a = dot(uk, w);
+                            for (w, u) in w.iter_mut().zip(uk) {
+                                *w -= a * u;
+                            }
+                        }
+                    }
+                    let nw = dot(w, w).sqrt();
+                    if !(nw > 0.0) {
+                        w.fill(0.0);
+                        break;
+                    }
+                    for v in w.iter_mut() {
+                        *v /= nw;
+                    }
+                    for (t, row) in e.chunks_exact(d).enumerate() {
+                        let a = dot(w, row);
+                        row_tan[i * nx + start + t] = a;
+                        res[t] -= a * a;
+                    }
+                }
+                // ‖UUᵀ − I‖ ≤ its Frobenius norm (plus a margin for its own
+                // rounding).
+                let mut f = 0.0;
+                for i in 0..TANGENT {
+                    for k in 0..TANGENT {
+                        let g = dot(&u[i * d..(i + 1) * d], &u[k * d..(k + 1) * d]);
+                        let want = if i == k && u[i * d..(i + 1) * d].iter().any(|&v| v != 0.0) {
+                            1.0
+                        } else {
+                            0.0
+                        };
+                        f += (g - want) * (g - want);
+                    }
+                }
+                // (The query-time bounds use 1 − η ≤ 1/(1 + η) and 1 + 2η ≥
+                // 1/(1 − η), true for η ≤ 1/2: a ball whose directions are
+                // that far from orthonormal gets none.)
+                if f.sqrt() + 1e-14 > 0.25 {
+                    u.fill(0.0);
+                    f = 0.0;
+                }
+                // Unused directions (zero) give zero coordinates.
+                for i in 0..TANGENT {
+                    if u[i * d..(i + 1) * d].iter().all(|&v| v == 0.0) {
+                        row_tan[i * nx + start..i * nx + start + len].fill(0.0);
+                    }
+                }
+                eta = eta.max(f.sqrt() + 1e-14);
+                let (lo, hi) = (
+                    &mut box_lo[c * TANGENT..(c + 1) * TANGENT],
+                    &mut box_hi[c * TANGENT..(c + 1) * TANGENT],
+                );
+                lo.fill(f64::INFINITY);
+                hi.fill(f64::NEG_INFINITY);
+                let mut perp2 = 0.0f64;
+                for (k, &nk) in n0.iter().enumerate() {
+                    let mut a2 = 0.0;
+                    for i in 0..TANGENT {
+                        let a = row_tan[i * nx + start + k];
+                        lo[i] = lo[i].min(a);
+                        hi[i] = hi[i].max(a);
+                        a2 += a * a;
+                    }
+                    let p2 = nk * (1.0 + sl) - a2 * (1.0 - sl) / (1.0 + eta);
+                    row_perp[start + k] = (p2.max(0.0) + sl * r * r).sqrt() * (1.0 + sl);
+                    perp2 = perp2.max(p2);
+                }
+                // Outwards by the coordinates' rounding (at most sl r).
+                lo.iter_mut().for_each(|v| *v -= sl * r);
+                hi.iter_mut().for_each(|v| *v += sl * r);
+                r_perp[c] = (perp2.max(0.0) + sl * r * r).sqrt() * (1.0 + sl);
+                for i in 0..TANGENT {
+                    uc[c * TANGENT + i] = dot(&u[i * d..(i + 1) * d], mean);
+                }
+            }
+        Geometry {
+            centers,
+            radii,
+            to_center,
+            tangent,
+            box_lo,
+            box_hi,
+            r_perp,
+            row_tan,
+            row_perp,
+            uc,
+            eta,
+        }
+    }
+}
+
 /// Per-thread buffers of [`ball_block`].
 struct BallWork {
     /// Dot products of the centres with a super-block's queries (m per
@@ -566,16 +622,31 @@ crate::cpu::dispatched! {
                 let far = reach + r;
                 *p = lo2 - far * far;
             }
-            // The passing balls' list, written branch-free (every index
-            // stored, the count advanced only past those that pass).
+            // The passing balls' list: eight balls' tests to a bit mask
+            // (one vector compare), then only the set bits visited.
             let base = work.p_list.len();
             work.p_start.push(base);
             work.p_list.resize(base + m, 0);
             let list = &mut work.p_list[base..];
             let mut n = 0;
-            for j in 0..m {
-                list[n] = j as u32;
-                n += usize::from(pass[j] <= 0.0);
+            let chunks = pass.chunks_exact(8);
+            let tail = chunks.remainder();
+            for (c, ch) in chunks.enumerate() {
+                let mut mask = 0u32;
+                for l in 0..8 {
+                    mask |= u32::from(ch[l] <= 0.0) << l;
+                }
+                while mask != 0 {
+                    list[n] = (c * 8) as u32 + mask.trailing_zeros();
+                    n += 1;
+                    mask &= mask - 1;
+                }
+            }
+            for (l, &p) in tail.iter().enumerate() {
+                if p <= 0.0 {
+                    list[n] = (m - tail.len() + l) as u32;
+                    n += 1;
+                }
             }
             work.p_list.truncate(base + n);
         }
@@ -631,8 +702,7 @@ crate::cpu::dispatched! {
                     work.visit.push((tb.lb2, j as u32, tb));
                 }
             }
-            work.visit
-                .sort_unstable_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+            sort_visits(&mut work.visit);
             for v in 0..work.visit.len() {
                 let (lb2, j, tb) = work.visit[v];
                 if lb2 > best.0 {
@@ -682,6 +752,24 @@ crate::cpu::dispatched! {
             work.slot[j as usize] = u32::MAX;
         }
         out
+    }
+}
+
+/// `visit` by bound, then ball: an insertion sort for the few balls a
+/// query usually visits (no call, no comparator), the library's sort for
+/// more.
+#[inline(always)]
+fn sort_visits(visit: &mut [(f64, u32, Tangent)]) {
+    if visit.len() > 16 {
+        visit.sort_unstable_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+        return;
+    }
+    for i in 1..visit.len() {
+        let mut k = i;
+        while k > 0 && (visit[k - 1].0, visit[k - 1].1) > (visit[k].0, visit[k].1) {
+            visit.swap(k - 1, k);
+            k -= 1;
+        }
     }
 }
 

@@ -31,6 +31,44 @@ const LOCAL_FROM: usize = 512;
 /// them).
 const LOCAL_CANDIDATES: usize = 24;
 
+crate::cpu::dispatched! {
+    /// The first `j` minimising `c_norm[j] − 2 g[j]` (a row's squared
+    /// distance to mean `j` less its own squared norm, from the dot
+    /// products `g`), `None` when none is below infinity: eight running
+    /// minima (lane `l` sees `j ≡ l mod 8` in order, keeping the first of
+    /// equals), then the least of them, ties to the smaller index — the
+    /// plain scan's answer, in SIMD lanes.
+    fn nearest_mean(g: &[f32], c_norm: &[f64]) -> Option<u32> {
+        let m = g.len().min(c_norm.len());
+        let mut best = [f64::INFINITY; 8];
+        let mut arg = [u32::MAX; 8];
+        let (gc, cc) = (g[..m].chunks_exact(8), c_norm[..m].chunks_exact(8));
+        let (gr, cr) = (gc.remainder(), cc.remainder());
+        for (b, (gs, cs)) in gc.zip(cc).enumerate() {
+            for l in 0..8 {
+                let s = cs[l] - 2.0 * f64::from(gs[l]);
+                let better = s < best[l];
+                best[l] = if better { s } else { best[l] };
+                arg[l] = if better { (b * 8 + l) as u32 } else { arg[l] };
+            }
+        }
+        let base = m - gr.len();
+        for (l, (&gj, &cj)) in gr.iter().zip(cr).enumerate() {
+            let s = cj - 2.0 * f64::from(gj);
+            if s < best[l] {
+                (best[l], arg[l]) = (s, (base + l) as u32);
+            }
+        }
+        let mut out = (f64::INFINITY, u32::MAX);
+        for l in 0..8 {
+            if best[l] < out.0 || (best[l] == out.0 && arg[l] < out.1) {
+                out = (best[l], arg[l]);
+            }
+        }
+        (out.1 != u32::MAX).then_some(out.1)
+    }
+}
+
 /// For each of the `m` centres (row-major, `d` wide, squared norms
 /// `c_norm`), the `nb` nearest centres (itself first: distance 0), by
 /// blocked GEMMs.
@@ -312,14 +350,9 @@ impl Partition {
                         Par::Seq,
                     );
                     for (i, o) in out.iter_mut().enumerate() {
-                        let mut best = (f64::INFINITY, *o);
-                        for (j, &gj) in g.col_as_slice(i).iter().enumerate() {
-                            let s = c_norm[j] - 2.0 * f64::from(gj);
-                            if s < best.0 {
-                                best = (s, j as u32);
-                            }
+                        if let Some(j) = nearest_mean(g.col_as_slice(i), &c_norm) {
+                            *o = j;
                         }
-                        *o = best.1;
                     }
                 });
         }
@@ -385,6 +418,45 @@ mod tests {
                     .sum::<f64>()
             })
             .sum()
+    }
+
+    /// The lane-wise argmin of a Lloyd step is the plain scan's: the
+    /// first least score, at every length (8-lane chunks and a tail),
+    /// with ties across lanes and chunks, and no answer when every score
+    /// is infinite; at every SIMD level this CPU has.
+    #[test]
+    fn nearest_mean_is_the_first_least_score() {
+        let plain = |g: &[f32], c: &[f64]| {
+            let mut best = (f64::INFINITY, None);
+            for (j, (&gj, &cj)) in g.iter().zip(c).enumerate() {
+                let s = cj - 2.0 * f64::from(gj);
+                if s < best.0 {
+                    best = (s, Some(j as u32));
+                }
+            }
+            best.1
+        };
+        let mut state = 7u64;
+        let mut next = move || {
+            state = state
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (state >> 40) % 5
+        };
+        for level in crate::SimdLevel::ALL {
+            crate::set_simd_cap(Some(level));
+            for m in [0usize, 1, 7, 8, 9, 17, 40] {
+                for _ in 0..50 {
+                    // Few distinct values: many ties.
+                    let g: Vec<f32> = (0..m).map(|_| next() as f32).collect();
+                    let c: Vec<f64> = (0..m).map(|_| next() as f64).collect();
+                    assert_eq!(nearest_mean(&g, &c), plain(&g, &c), "m = {m}, {level:?}");
+                }
+            }
+            let inf = vec![f64::INFINITY; 11];
+            assert_eq!(nearest_mean(&[0.0; 11], &inf), None);
+        }
+        crate::set_simd_cap(None);
     }
 
     /// Lloyd steps, over all clusters (few clusters) or over each row's

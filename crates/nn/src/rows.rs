@@ -81,24 +81,31 @@ impl<'a> Rows<'a> {
     /// scale. (`v · 0` is 0 for every finite `v` and NaN otherwise, and a
     /// sum of zeros cannot overflow.)
     pub(crate) fn max_abs_finite(&self) -> Option<f64> {
-        let mut lanes = [0.0f64; 8];
-        let mut zero = [0.0f64; 8];
-        for i in 0..self.n {
-            let r = self.row(i);
-            let mut chunks = r.chunks_exact(8);
-            for c in &mut chunks {
-                for ((l, z), v) in lanes.iter_mut().zip(&mut zero).zip(c) {
+        max_abs_finite(self)
+    }
+}
+
+crate::cpu::dispatched! {
+    /// [`Rows::max_abs_finite`].
+    fn max_abs_finite(rows: &Rows<'_>) -> Option<f64> {
+            let mut lanes = [0.0f64; 8];
+            let mut zero = [0.0f64; 8];
+            for i in 0..rows.n {
+                let r = rows.row(i);
+                let mut chunks = r.chunks_exact(8);
+                for c in &mut chunks {
+                    for ((l, z), v) in lanes.iter_mut().zip(&mut zero).zip(c) {
+                        *l = l.max(v.abs());
+                        *z += v * 0.0;
+                    }
+                }
+                for ((l, z), v) in lanes.iter_mut().zip(&mut zero).zip(chunks.remainder()) {
                     *l = l.max(v.abs());
                     *z += v * 0.0;
                 }
             }
-            for ((l, z), v) in lanes.iter_mut().zip(&mut zero).zip(chunks.remainder()) {
-                *l = l.max(v.abs());
-                *z += v * 0.0;
-            }
-        }
-        let finite = zero.iter().sum::<f64>() == 0.0;
-        finite.then(|| lanes.into_iter().fold(0.0, f64::max))
+            let finite = zero.iter().sum::<f64>() == 0.0;
+            finite.then(|| lanes.into_iter().fold(0.0, f64::max))
     }
 }
 

@@ -56,70 +56,66 @@ pub(crate) fn clusters(rows: &[f64], d: usize, leaf: usize) -> Clusters {
     }
 }
 
-/// Splits `idx` (points `offset..offset + idx.len()` of the final order)
-/// at the median of the projections on the principal direction (two power
-/// iterations from the direction of the point farthest from the mean).
-pub(crate) fn split(
-    rows: &[f64],
-    d: usize,
-    idx: &mut [usize],
-    offset: usize,
-    leaf: usize,
-) -> Vec<(usize, usize)> {
-    let n = idx.len();
-    if n <= leaf {
-        return vec![(offset, n)];
-    }
-    let row = |i: usize| &rows[i * d..(i + 1) * d];
-    let mut mean = vec![0.0; d];
-    for &i in idx.iter() {
-        mean.iter_mut().zip(row(i)).for_each(|(m, x)| *m += x);
-    }
-    mean.iter_mut().for_each(|m| *m /= n as f64);
-    let far = idx
-        .iter()
-        .map(|&i| (dist2(row(i), &mean), i))
-        .fold((-1.0, 0), |a, b| if b.0 > a.0 { b } else { a })
-        .1;
-    let mut v: Vec<f64> = row(far).iter().zip(&mean).map(|(x, m)| x - m).collect();
-    let mut centred = vec![0.0; d];
-    for _ in 0..2 {
-        let mut w = vec![0.0; d];
+crate::cpu::dispatched! {
+    /// Splits `idx` (points `offset..offset + idx.len()` of the final order)
+    /// at the median of the projections on the principal direction (two power
+    /// iterations from the direction of the point farthest from the mean).
+    pub(crate) fn split(rows: &[f64], d: usize, idx: &mut [usize], offset: usize, leaf: usize) -> Vec<(usize, usize)> {
+        let n = idx.len();
+        if n <= leaf {
+            return vec![(offset, n)];
+        }
+        let row = |i: usize| &rows[i * d..(i + 1) * d];
+        let mut mean = vec![0.0; d];
         for &i in idx.iter() {
-            centred
-                .iter_mut()
-                .zip(row(i))
-                .zip(&mean)
-                .for_each(|((c, x), m)| *c = x - m);
-            let t = dot8(&centred, &v);
-            w.iter_mut().zip(&centred).for_each(|(w, c)| *w += t * c);
+            mean.iter_mut().zip(row(i)).for_each(|(m, x)| *m += x);
         }
-        let norm = dot8(&w, &w).sqrt();
-        if norm == 0.0 {
-            break;
+        mean.iter_mut().for_each(|m| *m /= n as f64);
+        let far = idx
+            .iter()
+            .map(|&i| (dist2(row(i), &mean), i))
+            .fold((-1.0, 0), |a, b| if b.0 > a.0 { b } else { a })
+            .1;
+        let mut v: Vec<f64> = row(far).iter().zip(&mean).map(|(x, m)| x - m).collect();
+        let mut centred = vec![0.0; d];
+        for _ in 0..2 {
+            let mut w = vec![0.0; d];
+            for &i in idx.iter() {
+                centred
+                    .iter_mut()
+                    .zip(row(i))
+                    .zip(&mean)
+                    .for_each(|((c, x), m)| *c = x - m);
+                let t = dot8(&centred, &v);
+                w.iter_mut().zip(&centred).for_each(|(w, c)| *w += t * c);
+            }
+            let norm = dot8(&w, &w).sqrt();
+            if norm == 0.0 {
+                break;
+            }
+            v = w.into_iter().map(|x| x / norm).collect();
         }
-        v = w.into_iter().map(|x| x / norm).collect();
+        let mut keyed: Vec<(f64, usize)> = idx.iter().map(|&i| (dot8(row(i), &v), i)).collect();
+        let mid = n / 2;
+        keyed.select_nth_unstable_by(mid, |a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+        for (slot, (_, i)) in idx.iter_mut().zip(keyed) {
+            *slot = i;
+        }
+        let (left, right) = idx.split_at_mut(mid);
+        let (mut l, r) = if n > 8192 {
+            rayon::join(
+                || split(rows, d, left, offset, leaf),
+                || split(rows, d, right, offset + mid, leaf),
+            )
+        } else {
+            (
+                split(rows, d, left, offset, leaf),
+                split(rows, d, right, offset + mid, leaf),
+            )
+        };
+        l.extend(r);
+        l
     }
-    let mut keyed: Vec<(f64, usize)> = idx.iter().map(|&i| (dot8(row(i), &v), i)).collect();
-    let mid = n / 2;
-    keyed.select_nth_unstable_by(mid, |a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
-    for (slot, (_, i)) in idx.iter_mut().zip(keyed) {
-        *slot = i;
-    }
-    let (left, right) = idx.split_at_mut(mid);
-    let (mut l, r) = if n > 8192 {
-        rayon::join(
-            || split(rows, d, left, offset, leaf),
-            || split(rows, d, right, offset + mid, leaf),
-        )
-    } else {
-        (
-            split(rows, d, left, offset, leaf),
-            split(rows, d, right, offset + mid, leaf),
-        )
-    };
-    l.extend(r);
-    l
 }
 
 /// The clustered exact search. Per query cluster: lower bounds

@@ -50,16 +50,26 @@ impl BasisRows {
     fn of(m: &DMatrix<f64>, k: usize, rows: Option<&[usize]>) -> BasisRows {
         let n = rows.map_or(m.nrows(), <[usize]>::len);
         let mut v = vec![0.0; n * k];
+        let (nr, all) = (m.nrows(), m.as_slice());
         if k > 0 {
-            // Blocks of 8 rows, column by column (contiguous reads of each
-            // column for consecutive rows), in parallel.
-            v.par_chunks_mut(8 * k).enumerate().for_each(|(b, block)| {
-                let i0 = b * 8;
+            // Tiles of 32 rows (a tile of 32 x k stays in L1 while the
+            // columns are read 32 entries at a time), in parallel.
+            v.par_chunks_mut(32 * k).enumerate().for_each(|(b, tile)| {
+                let i0 = b * 32;
+                let len = tile.len() / k;
                 for j in 0..k {
-                    let col = m.column(j);
-                    let col = col.as_slice();
-                    for (t, row) in block.chunks_exact_mut(k).enumerate() {
-                        row[j] = col[rows.map_or(i0 + t, |r| r[i0 + t])];
+                    let col = &all[j * nr..(j + 1) * nr];
+                    match rows {
+                        None => {
+                            for (t, &x) in col[i0..i0 + len].iter().enumerate() {
+                                tile[t * k + j] = x;
+                            }
+                        }
+                        Some(r) => {
+                            for (t, &i) in r[i0..i0 + len].iter().enumerate() {
+                                tile[t * k + j] = col[i];
+                            }
+                        }
                     }
                 }
             });
