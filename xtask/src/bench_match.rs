@@ -1,6 +1,7 @@
 //! `cargo xtask bench-match`: per-stage time of the matching pipeline
 //! (no refinement) against pyFM's same pipeline on the same pair, in the
-//! same run (`../shared/peers/pyfm_pipeline.py --bench-pair`).
+//! same run (`../shared/peers/pyfm_pipeline.py --bench-pair`), and the
+//! whole pipeline with ZoomOut 50:150:5 (one start) on both sides.
 
 use std::path::PathBuf;
 use std::process::Command;
@@ -9,7 +10,8 @@ use std::time::Instant;
 use anyhow::bail;
 use fmaps::MatchParams;
 use fmaps::eval::Collection;
-use fmaps::pipeline::{match_prepared, prepare};
+use fmaps::pipeline::{Refinement, match_prepared, prepare};
+use fmaps::refine::ZoomOut;
 use serde_json::json;
 
 use crate::util::{data_dir, median, peer_python, peers_dir, root, run};
@@ -67,6 +69,28 @@ pub fn bench_match(args: &Args) -> anyhow::Result<()> {
     let ours: Vec<f64> = (0..6)
         .map(|i| median(stages.iter().map(|r| r[i]).collect()))
         .collect();
+    // The whole pipeline with ZoomOut 50:150:5 from the fitted map, one
+    // start (`fmaps match --refine zoomout --starts none` in-process:
+    // load, eigenbases, descriptors, fit, point map, ZoomOut).
+    let mut whole = Vec::new();
+    for _ in 0..args.bench.repeat {
+        whole.push(pool.install(|| -> anyhow::Result<f64> {
+            let t = Instant::now();
+            let (ma, mb) = (c.read_mesh(&a)?, c.read_mesh(&b)?);
+            let p = MatchParams {
+                refine: Refinement::ZoomOut {
+                    zoomout: ZoomOut::default(),
+                    samples: None,
+                },
+                ..MatchParams::default()
+            };
+            let (pa, pb) = rayon::join(|| prepare(&ma, &p), || prepare(&mb, &p));
+            let r = match_prepared(&pa?, &pb?, &p)?;
+            std::hint::black_box(&r.t_ab);
+            Ok(t.elapsed().as_secs_f64())
+        })?);
+    }
+    let whole = median(whole);
 
     let out = std::env::temp_dir().join(format!("fmaps-bench-match-{}", std::process::id()));
     run(Command::new(&py)
@@ -95,6 +119,9 @@ pub fn bench_match(args: &Args) -> anyhow::Result<()> {
     ];
     let mut peer = peer;
     peer[5] = peer[..5].iter().sum();
+    // pyFM's same pipeline with ZoomOut 50:150:5 from the oriented fit
+    // (its stages' medians summed).
+    let peer_whole = peer[5] + g("zoomout_orient");
     let _ = std::fs::remove_dir_all(&out);
 
     println!("{}", crate::util::machine_header(args.bench.threads));
@@ -123,6 +150,13 @@ pub fn bench_match(args: &Args) -> anyhow::Result<()> {
             peer[i] / ours[i]
         );
     }
+    println!(
+        "{:<34} {:>9.3} {:>9.3} {:>7.1}x",
+        "whole, + ZoomOut 50:150:5 (1 start)",
+        whole,
+        peer_whole,
+        peer_whole / whole
+    );
     let fit_p2p = (peer[3] + peer[4]) / (ours[3] + ours[4]);
     println!("fit + point map: {fit_p2p:.1}x faster than pyFM");
     let path: PathBuf = root().join(format!(
@@ -135,6 +169,7 @@ pub fn bench_match(args: &Args) -> anyhow::Result<()> {
         serde_json::to_string_pretty(&json!({
             "pair": [a, b], "threads": args.bench.threads, "repeat": args.bench.repeat,
             "stages": names, "fmaps": ours, "pyfm": peer, "fit_p2p_ratio": fit_p2p,
+            "whole_zoomout": {"fmaps": whole, "pyfm": peer_whole},
         }))?,
     )?;
     println!("{}", path.display());

@@ -237,8 +237,19 @@ impl BallData {
         if hint.is_some() {
             qorder.sort_by_key(|&q| (cluster(q), q));
         }
-        let q_rows = queries.gather(Some(&qorder), scale);
-        let q32: Vec<f32> = q_rows.iter().map(|&v| v as f32).collect();
+        // The queries' f64 rows read in place (through `qorder`), or
+        // gathered in that order when they must be scaled; in f32 for the
+        // GEMMs, in that order.
+        let scaled = scale.map(|_| Rows::owned(queries.gather(Some(&qorder), scale), nq, self.d));
+        let (q_src, q_map) = match &scaled {
+            Some(r) => (r, None),
+            None => (queries, Some(qorder.as_slice())),
+        };
+        let mut q32: Vec<f32> = Vec::with_capacity(nq * self.d);
+        for t in 0..nq {
+            let row = q_src.row(q_map.map_or(t, |o| o[t]));
+            q32.extend(row.iter().map(|&v| v as f32));
+        }
         let hints: Option<Vec<usize>> = hint.map(|h| qorder.iter().map(|&q| h[q]).collect());
         let keys: Vec<u32> = qorder.iter().map(|&q| cluster(q)).collect();
         // Blocks: the queries whose guesses share a ball (they search the
@@ -293,7 +304,7 @@ impl BallData {
                         let gb = &g[(q0 - s0) * m..(q0 - s0 + len) * m];
                         out.extend(ball_block(
                             self,
-                            (&q_rows, &q32),
+                            (q_src, q_map, &q32),
                             hints.as_deref(),
                             q0,
                             len,
@@ -557,7 +568,7 @@ crate::cpu::dispatched! {
     /// filtered by the same bound per row, the rest measured exactly.
     fn ball_block(
         this: &BallData,
-        queries: (&[f64], &[f32]),
+        queries: (&Rows<'_>, Option<&[usize]>, &[f32]),
         hint: Option<&[usize]>,
         q0: usize,
         len: usize,
@@ -566,7 +577,8 @@ crate::cpu::dispatched! {
     ) -> Vec<usize> {
         let (d, m, nx) = (this.d, this.ranges.len(), this.order.len());
         // The queries in f64 (for the exact distances) and f32 (the GEMMs).
-        let (q_rows, q32) = queries;
+        // (Query t of the block order is row `q_map[t]` of `q_rows`.)
+        let (q_rows, q_map, q32) = queries;
         let sl = slack(d);
         let qb = MatRef::from_row_major_slice(&q32[q0 * d..(q0 + len) * d], len, d);
         // Plain loops, no closures: closures would not be compiled for the
@@ -574,11 +586,11 @@ crate::cpu::dispatched! {
         work.p_list.clear();
         work.p_start.clear();
         for i in 0..len {
-            let q = &q_rows[(q0 + i) * d..(q0 + i + 1) * d];
-            let mut qn = 0.0;
-            for v in q {
-                qn += v * v;
-            }
+            let q = q_rows.row(match q_map {
+                Some(o) => o[q0 + i],
+                None => q0 + i,
+            });
+            let qn = dot(q, q);
             work.qn[i] = qn;
             // The error of the f32 products with this query: its share of
             // 2 q·c's, and each coordinate along a direction.
@@ -678,7 +690,10 @@ crate::cpu::dispatched! {
         );
         let mut out = Vec::with_capacity(len);
         for i in 0..len {
-            let q = &q_rows[(q0 + i) * d..(q0 + i + 1) * d];
+            let q = q_rows.row(match q_map {
+                Some(o) => o[q0 + i],
+                None => q0 + i,
+            });
             let (qn, mut best) = (work.qn[i], work.best[i]);
             let q_norm = qn.sqrt();
             let g = &gb[i * m..(i + 1) * m];

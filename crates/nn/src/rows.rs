@@ -47,6 +47,19 @@ impl<'a> Rows<'a> {
         }
     }
 
+    /// The rows of `v` (row-major, `n` x `d`), owned.
+    pub(crate) fn owned(v: Vec<f64>, n: usize, d: usize) -> Rows<'static> {
+        assert_eq!(v.len(), n * d, "{n} rows of {d}");
+        Rows {
+            ptr: v.as_ptr(),
+            stride: d,
+            n,
+            d,
+            _owned: v,
+            _view: std::marker::PhantomData,
+        }
+    }
+
     /// Row count and length.
     pub(crate) fn shape(&self) -> (usize, usize) {
         (self.n, self.d)
