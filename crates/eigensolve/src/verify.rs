@@ -115,28 +115,63 @@ impl SpectralBasis {
 
 /// `‖Lφᵢ − λᵢMφᵢ‖_{M⁻¹}` for every column.
 fn residuals(problem: &EigenProblem<'_>, lambda: &DVector<f64>, phi: &DMatrix<f64>) -> Vec<f64> {
-    let k = phi.ncols();
+    let (n, k) = phi.shape();
     let l = problem.stiffness();
     let m = problem.mass();
     let mut out = Vec::with_capacity(k);
-    for c in 0..k {
-        let x = phi.column(c);
-        let x = x.as_slice();
-        let mut s = 0.0;
-        // Row j of L·x as a dot product with column j (L is symmetric, so
-        // CSC and CSR storage give the same product): a gather per row,
-        // and the residual's term right away.
-        for (j, lane) in l.outer_iterator().enumerate() {
-            let mut lp = 0.0;
-            for (&i, &v) in lane.indices().iter().zip(lane.data()) {
-                lp += v * x[i];
+    // Blocks of RESIDUAL_BLOCK columns copied row-major: every stored
+    // entry of L then scales one contiguous row of the block (SIMD across
+    // the columns), and each column's sums run in the same order as one
+    // column at a time.
+    let mut rows = Vec::new();
+    for c0 in (0..k).step_by(RESIDUAL_BLOCK) {
+        let w = RESIDUAL_BLOCK.min(k - c0);
+        rows.clear();
+        rows.resize(n * w, 0.0);
+        for c in 0..w {
+            for (j, &v) in phi.column(c0 + c).iter().enumerate() {
+                rows[j * w + c] = v;
             }
-            let r = lp - lambda[c] * m[j] * x[j];
-            s += r * r / m[j];
         }
-        out.push(s.sqrt());
+        let lam = &lambda.as_slice()[c0..c0 + w];
+        out.extend(residual_block(l, m, &rows, w, lam));
     }
     out
+}
+
+/// Columns per block of [`residuals`].
+const RESIDUAL_BLOCK: usize = 16;
+
+fmaps_simd::dispatched! {
+    /// `‖L x − λ M x‖_{M⁻¹}` of the `w` columns of `rows` (row-major, `w`
+    /// wide), row `j` of `L x` as the dot product of column `j` of `L`
+    /// with `x` (L is symmetric, so CSC and CSR storage give the same
+    /// product).
+    fn residual_block(
+        l: sprs::CsMatView<'_, f64>,
+        m: &[f64],
+        rows: &[f64],
+        w: usize,
+        lam: &[f64],
+    ) -> Vec<f64> {
+        let mut s = vec![0.0; w];
+        let mut lp = vec![0.0; w];
+        for (j, lane) in l.outer_iterator().enumerate() {
+            lp.fill(0.0);
+            for (&i, &v) in lane.indices().iter().zip(lane.data()) {
+                let x = &rows[i * w..(i + 1) * w];
+                for c in 0..w {
+                    lp[c] += v * x[c];
+                }
+            }
+            let xj = &rows[j * w..(j + 1) * w];
+            for c in 0..w {
+                let r = lp[c] - lam[c] * m[j] * xj[c];
+                s[c] += r * r / m[j];
+            }
+        }
+        s.into_iter().map(f64::sqrt).collect()
+    }
 }
 
 /// `max |ΦᵀMΦ − I|`.
