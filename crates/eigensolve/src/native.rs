@@ -565,10 +565,12 @@ fn gather_columns(u: MatRef<'_, f64>, idx: &[usize]) -> Mat<f64> {
     Mat::from_fn(u.nrows(), idx.len(), |i, j| u[(i, idx[j])])
 }
 
+#[inline(always)]
 fn norm(x: &[f64]) -> f64 {
     x.iter().map(|v| v * v).sum::<f64>().sqrt()
 }
 
+#[inline(always)]
 fn dot(x: &[f64], y: &[f64]) -> f64 {
     x.iter().zip(y).map(|(a, b)| a * b).sum()
 }
@@ -590,67 +592,61 @@ fn orthonormalize_block(
     orthonormalize_against(v, n, start, b, &pre, r, rng);
 }
 
-/// Makes columns `start..start+b` orthonormal and orthogonal to columns
-/// `0..start` (which are orthonormal), writing R (b x b) with
-/// `W = Q R` for the part of W orthogonal to the earlier columns.
-///
-/// A column whose norm collapses below `1e-13` of `pre_norms[j]` (the norm
-/// of W before any orthogonalization) is dependent: it is replaced by a
-/// random unit vector orthogonal to everything, with a zero row in R —
-/// the Krylov space has an invariant subspace there, and the new direction
-/// continues the iteration.
-fn orthonormalize_against(
-    v: &mut [f64],
-    n: usize,
-    start: usize,
-    b: usize,
-    pre_norms: &[f64],
-    r: &mut Mat<f64>,
-    rng: &mut SplitMix,
-) {
-    r.fill(0.0);
-    for j in 0..b {
-        let cj = start + j;
-        let (before, rest) = v.split_at_mut(cj * n);
-        let x = &mut rest[..n];
-        for _pass in 0..2 {
-            for i in 0..j {
-                let q = &before[(start + i) * n..(start + i + 1) * n];
-                let a = dot(q, x);
-                r[(i, j)] += a;
-                for t in 0..n {
-                    x[t] -= a * q[t];
-                }
-            }
-        }
-        let nrm = norm(x);
-        if nrm > 1e-13 * pre_norms[j] && nrm > 0.0 {
-            r[(j, j)] = nrm;
-            for t in x.iter_mut() {
-                *t /= nrm;
-            }
-            continue;
-        }
-        // Dependent column: a random direction orthogonal to columns 0..cj.
-        loop {
-            for t in x.iter_mut() {
-                *t = rng.next_f64();
-            }
+fmaps_simd::dispatched! {
+    /// Makes columns `start..start+b` orthonormal and orthogonal to columns
+    /// `0..start` (which are orthonormal), writing R (b x b) with
+    /// `W = Q R` for the part of W orthogonal to the earlier columns.
+    ///
+    /// A column whose norm collapses below `1e-13` of `pre_norms[j]` (the norm
+    /// of W before any orthogonalization) is dependent: it is replaced by a
+    /// random unit vector orthogonal to everything, with a zero row in R —
+    /// the Krylov space has an invariant subspace there, and the new direction
+    /// continues the iteration.
+    fn orthonormalize_against(v: &mut [f64], n: usize, start: usize, b: usize, pre_norms: &[f64], r: &mut Mat<f64>, rng: &mut SplitMix) -> () {
+        r.fill(0.0);
+        for j in 0..b {
+            let cj = start + j;
+            let (before, rest) = v.split_at_mut(cj * n);
+            let x = &mut rest[..n];
             for _pass in 0..2 {
-                for i in 0..cj {
-                    let q = &before[i * n..(i + 1) * n];
+                for i in 0..j {
+                    let q = &before[(start + i) * n..(start + i + 1) * n];
                     let a = dot(q, x);
+                    r[(i, j)] += a;
                     for t in 0..n {
                         x[t] -= a * q[t];
                     }
                 }
             }
             let nrm = norm(x);
-            if nrm > 1e-8 {
+            if nrm > 1e-13 * pre_norms[j] && nrm > 0.0 {
+                r[(j, j)] = nrm;
                 for t in x.iter_mut() {
                     *t /= nrm;
                 }
-                break;
+                continue;
+            }
+            // Dependent column: a random direction orthogonal to columns 0..cj.
+            loop {
+                for t in x.iter_mut() {
+                    *t = rng.next_f64();
+                }
+                for _pass in 0..2 {
+                    for i in 0..cj {
+                        let q = &before[i * n..(i + 1) * n];
+                        let a = dot(q, x);
+                        for t in 0..n {
+                            x[t] -= a * q[t];
+                        }
+                    }
+                }
+                let nrm = norm(x);
+                if nrm > 1e-8 {
+                    for t in x.iter_mut() {
+                        *t /= nrm;
+                    }
+                    break;
+                }
             }
         }
     }
