@@ -74,28 +74,15 @@ pub(crate) struct BallData {
     pos_of: Vec<u32>,
     /// (start, len) of each ball in ball order.
     ranges: Vec<(usize, usize)>,
-    /// The squared norms of the ball centres (means), their square roots,
-    /// and the balls' radii (rounded up).
+    /// The squared norms of the ball centres (means) and their square
+    /// roots.
     c_norm: Vec<f64>,
     c_len: Vec<f64>,
-    radii: Vec<f64>,
-    /// Each row's distance to its ball's centre (ball order).
-    to_center: Vec<f64>,
     /// The ball of each row (original order).
     ball_of: Vec<u32>,
-    /// Per ball, the box `[lo, hi]` of the rows' coordinates along its
-    /// directions (rounded outwards), and a bound on the rows' distance
-    /// to their affine span.
-    box_lo: Vec<f64>,
-    box_hi: Vec<f64>,
-    r_perp: Vec<f64>,
-    /// Per row (ball order): its coordinates along its ball's directions
-    /// (direction by direction: `row_tan[i * n + p]`)
-    /// and a bound on its distance to their affine span.
-    row_tan: Vec<f64>,
-    row_perp: Vec<f64>,
-    /// Per ball, its directions' dot products with its centre.
-    uc: Vec<f64>,
+    /// Each ball's centre, radius and tangent box, each row's distance to
+    /// its centre and coordinates.
+    geo: Geometry,
     /// The ball centres (row-major, m x d), and per ball [`TANGENT`]
     /// orthonormal directions (row-major, `TANGENT x d`; unused ones zero)
     /// spanning most of its rows' spread, in f32: the GEMMs' operands,
@@ -105,8 +92,6 @@ pub(crate) struct BallData {
     centers32: Vec<f32>,
     tangent32: Vec<f32>,
     c_err: Vec<f64>,
-    /// A bound on `‖UUᵀ − I‖` over every ball's directions `U`.
-    eta: f64,
 }
 
 /// Directions per ball of the tangent bound: the rows of a small ball of
@@ -159,33 +144,22 @@ impl BallData {
         for (p, &i) in order.iter().enumerate() {
             pos_of[i] = p as u32;
         }
-        let Geometry {
-            centers,
-            radii,
-            to_center,
-            tangent,
-            box_lo,
-            box_hi,
-            r_perp,
-            row_tan,
-            row_perp,
-            uc,
-            eta,
-        } = geometry(&x_ord, d, &ranges);
+        let geo = geometry(&x_ord, d, &ranges);
         let mut ball_of = vec![0u32; nx];
         for (b, &(start, len)) in ranges.iter().enumerate() {
             for &i in &order[start..start + len] {
                 ball_of[i] = b as u32;
             }
         }
-        let c_norm: Vec<f64> = centers
+        let c_norm: Vec<f64> = geo
+            .centers
             .chunks_exact(d)
             .map(|c| c.iter().map(|v| v * v).sum())
             .collect();
         let c_err = c_norm.iter().map(|&cn| score_err(d, 0.0, cn)).collect();
         let c_len = c_norm.iter().map(|&cn| cn.sqrt()).collect();
-        let centers32 = centers.iter().map(|&v| v as f32).collect();
-        let tangent32 = tangent.iter().map(|&v| v as f32).collect();
+        let centers32 = geo.centers.iter().map(|&v| v as f32).collect();
+        let tangent32 = geo.tangent.iter().map(|&v| v as f32).collect();
         BallData {
             d,
             x_ord,
@@ -194,19 +168,11 @@ impl BallData {
             ranges,
             c_norm,
             c_len,
-            radii,
-            to_center,
             ball_of,
-            box_lo,
-            box_hi,
-            r_perp,
-            row_tan,
-            row_perp,
-            uc,
+            geo,
             centers32,
             tangent32,
             c_err,
-            eta,
         }
     }
 
@@ -414,7 +380,7 @@ crate::cpu::dispatched! {
             // The error of the f32 products with this query: its share of
             // 2 q·c's, and each coordinate along a direction.
             work.q_err[i] = score_err(d, qn, 0.0);
-            work.t_err[i] = score_err(d, qn, 1.0 + this.eta);
+            work.t_err[i] = score_err(d, qn, 1.0 + this.geo.eta);
             // (distance², original index): ties go to the smaller index.
             let mut best = (f64::INFINITY, usize::MAX);
             if let Some(&h) = hint.and_then(|h| h.get(q0 + i))
@@ -433,7 +399,7 @@ crate::cpu::dispatched! {
                     let s = qn + this.c_norm[j];
                     let e2 = work.q_err[i] + this.c_err[j];
                     let hi = (s - 2.0 * f64::from(g[j]) + sl * s + e2).max(0.0).sqrt() * (1.0 + sl);
-                    let far = (hi + this.radii[j]) * (1.0 + sl);
+                    let far = (hi + this.geo.radii[j]) * (1.0 + sl);
                     reach = if far < reach { far } else { reach };
                 }
             }
@@ -445,7 +411,7 @@ crate::cpu::dispatched! {
                 .iter_mut()
                 .zip(&this.c_norm[..m])
                 .zip(g)
-                .zip(&this.radii[..m])
+                .zip(&this.geo.radii[..m])
                 .zip(&this.c_err[..m])
             {
                 let s = qn + cn;
@@ -543,7 +509,7 @@ crate::cpu::dispatched! {
                     break;
                 }
                 let (start, l) = this.ranges[j as usize];
-                let tol = tb.eps + sl * this.radii[j as usize];
+                let tol = tb.eps + sl * this.geo.radii[j as usize];
                 // Each row's own bound, branch-free across the ball: its
                 // tangent bound and ||q − c| − |x − c||.
                 // (Slices of equal length and `max_finite`: the loop runs
@@ -551,11 +517,11 @@ crate::cpu::dispatched! {
                 work.row_lb.clear();
                 work.row_lb.resize(l, 0.0);
                 let lb = &mut work.row_lb[..l];
-                let (e, rp) = (&this.to_center[start..start + l], &this.row_perp[start..start + l]);
+                let (e, rp) = (&this.geo.to_center[start..start + l], &this.geo.row_perp[start..start + l]);
                 let rt: [&[f64]; TANGENT] =
-                    std::array::from_fn(|t| &this.row_tan[t * nx + start..t * nx + start + l]);
+                    std::array::from_fn(|t| &this.geo.row_tan[t * nx + start..t * nx + start + l]);
                 let (up, down, keep) = (1.0 + sl, 1.0 - sl, 1.0 - 2.0 * sl);
-                let flat = 1.0 - this.eta;
+                let flat = 1.0 - this.geo.eta;
                 for k in 0..l {
                     let a = max_finite(max_finite(tb.dc_lo - e[k] * up, e[k] * down - tb.dc_hi), 0.0);
                     let mut gap2 = 0.0;
@@ -637,10 +603,10 @@ fn tangent_bound(
 ) -> Option<Tangent> {
     let eps = sl * (q_norm + this.c_len[j]) + err.uq + f64::MIN_POSITIVE;
     let (lo, hi) = (
-        &this.box_lo[j * TANGENT..(j + 1) * TANGENT],
-        &this.box_hi[j * TANGENT..(j + 1) * TANGENT],
+        &this.geo.box_lo[j * TANGENT..(j + 1) * TANGENT],
+        &this.geo.box_hi[j * TANGENT..(j + 1) * TANGENT],
     );
-    let uc = &this.uc[j * TANGENT..(j + 1) * TANGENT];
+    let uc = &this.geo.uc[j * TANGENT..(j + 1) * TANGENT];
     let (mut gap2, mut t2) = (0.0, 0.0);
     let mut t = [0.0; TANGENT];
     for i in 0..TANGENT {
@@ -650,7 +616,7 @@ fn tangent_bound(
         let g = ((lo[i] - ti).max(ti - hi[i]) - eps).max(0.0);
         gap2 += g * g;
     }
-    let eta = this.eta;
+    let eta = this.geo.eta;
     if gap2 * (1.0 - eta) * (1.0 - 2.0 * sl) > cutoff {
         return None;
     }
@@ -661,8 +627,8 @@ fn tangent_bound(
     let dc_hi = v2_hi.sqrt() * (1.0 + sl);
     let tn = t2.sqrt() + 2.0 * eps;
     let perp = (v2_lo - tn * tn * (1.0 + 2.0 * eta)).max(0.0).sqrt() * (1.0 - sl);
-    let pb = (perp - this.r_perp[j]).max(0.0);
-    let plain = (dc_lo - this.radii[j]).max(0.0);
+    let pb = (perp - this.geo.r_perp[j]).max(0.0);
+    let plain = (dc_lo - this.geo.radii[j]).max(0.0);
     Some(Tangent {
         lb2: (gap2 * (1.0 - eta) + pb * pb).max(plain * plain) * (1.0 - 2.0 * sl),
         t,

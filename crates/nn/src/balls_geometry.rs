@@ -7,16 +7,29 @@ use crate::rows::dot8 as dot;
 
 /// The per-ball geometry of [`super::BallData`] (see its fields).
 pub(super) struct Geometry {
+    /// The ball centres (means; row-major, m x d) and the balls' radii
+    /// (rounded up).
     pub(super) centers: Vec<f64>,
     pub(super) radii: Vec<f64>,
+    /// Each row's distance to its ball's centre (ball order).
     pub(super) to_center: Vec<f64>,
+    /// Per ball, [`TANGENT`] orthonormal directions (row-major,
+    /// `TANGENT x d`; unused ones zero) spanning most of its rows' spread.
     pub(super) tangent: Vec<f64>,
+    /// Per ball, the box `[lo, hi]` of the rows' coordinates along its
+    /// directions (rounded outwards), and a bound on the rows' distance
+    /// to their affine span.
     pub(super) box_lo: Vec<f64>,
     pub(super) box_hi: Vec<f64>,
     pub(super) r_perp: Vec<f64>,
+    /// Per row (ball order): its coordinates along its ball's directions
+    /// (direction by direction: `row_tan[i * n + p]`) and a bound on its
+    /// distance to their affine span.
     pub(super) row_tan: Vec<f64>,
     pub(super) row_perp: Vec<f64>,
+    /// Per ball, its directions' dot products with its centre.
     pub(super) uc: Vec<f64>,
+    /// A bound on `‖UUᵀ − I‖` over every ball's directions `U`.
     pub(super) eta: f64,
 }
 

@@ -18,7 +18,7 @@ fn bound(b: &BallData, j: usize, qi: &[f64]) -> Tangent {
         .collect();
     let err = Err32 {
         qc: score_err(d, qn, 0.0) + b.c_err[j],
-        uq: score_err(d, qn, 1.0 + b.eta),
+        uq: score_err(d, qn, 1.0 + b.geo.eta),
     };
     tangent_bound(b, j, (qn, qn.sqrt()), qc, &uq, err, slack(d), f64::INFINITY).expect("no cutoff")
 }
@@ -57,17 +57,17 @@ fn bounds_are_below_the_distances() {
         for qi in qr.chunks_exact(d) {
             for (j, &(start, len)) in b.ranges.iter().enumerate() {
                 let tb = bound(&b, j, qi);
-                let tol = tb.eps + sl * b.radii[j];
+                let tol = tb.eps + sl * b.geo.radii[j];
                 for p in start..start + len {
                     let dist = dist2(&b.x_ord[p * d..(p + 1) * d], qi);
                     assert!(tb.lb2 <= dist, "d {d} cluster {j}: {} > {dist}", tb.lb2);
                     let mut gap2 = 0.0;
                     for t in 0..TANGENT {
-                        let g = ((tb.t[t] - b.row_tan[t * n + p]).abs() - tol).max(0.0);
+                        let g = ((tb.t[t] - b.geo.row_tan[t * n + p]).abs() - tol).max(0.0);
                         gap2 += g * g;
                     }
-                    let pb = (tb.perp - b.row_perp[p]).max(0.0);
-                    let row = (gap2 * (1.0 - b.eta) + pb * pb) * (1.0 - 2.0 * sl);
+                    let pb = (tb.perp - b.geo.row_perp[p]).max(0.0);
+                    let row = (gap2 * (1.0 - b.geo.eta) + pb * pb) * (1.0 - 2.0 * sl);
                     assert!(row <= dist, "d {d} row {p}: {row} > {dist}");
                     checked += 1;
                 }
@@ -75,7 +75,7 @@ fn bounds_are_below_the_distances() {
         }
         assert_eq!(checked, 200 * n);
         // The directions are orthonormal to rounding.
-        assert!(b.eta < 1e-12, "eta {}", b.eta);
+        assert!(b.geo.eta < 1e-12, "eta {}", b.geo.eta);
     }
 }
 
@@ -101,7 +101,7 @@ fn tangent_bound_is_tighter_than_the_ball() {
             .fold(f64::INFINITY, f64::min);
         for j in 0..b.ranges.len() {
             let tb = bound(&b, j, &qi);
-            let plain = (tb.dc_lo - b.radii[j]).max(0.0);
+            let plain = (tb.dc_lo - b.geo.radii[j]).max(0.0);
             ball += usize::from(plain * plain <= best);
             tangent += usize::from(tb.lb2 <= best);
         }
