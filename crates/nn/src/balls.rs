@@ -99,6 +99,16 @@ pub(crate) struct BallData {
 /// bent by curvature into a few more.
 pub(crate) const TANGENT: usize = 4;
 
+/// Query `t` of the search order: row `map[t]` of `rows` (row `t` without
+/// a map).
+#[inline(always)]
+fn query_row<'a>(rows: &'a Rows<'_>, map: Option<&[usize]>, t: usize) -> &'a [f64] {
+    rows.row(match map {
+        Some(o) => o[t],
+        None => t,
+    })
+}
+
 /// `max(a, b)` for numbers that are not NaN (a compare and a select,
 /// which vectorize, where `f64::max` also handles NaN).
 #[inline(always)]
@@ -213,7 +223,7 @@ impl BallData {
         };
         let mut q32: Vec<f32> = Vec::with_capacity(nq * self.d);
         for t in 0..nq {
-            let row = q_src.row(q_map.map_or(t, |o| o[t]));
+            let row = query_row(q_src, q_map, t);
             q32.extend(row.iter().map(|&v| v as f32));
         }
         let hints: Option<Vec<usize>> = hint.map(|h| qorder.iter().map(|&q| h[q]).collect());
@@ -371,10 +381,7 @@ crate::cpu::dispatched! {
         work.p_list.clear();
         work.p_start.clear();
         for i in 0..len {
-            let q = q_rows.row(match q_map {
-                Some(o) => o[q0 + i],
-                None => q0 + i,
-            });
+            let q = query_row(q_rows, q_map, q0 + i);
             let qn = dot(q, q);
             work.qn[i] = qn;
             // The error of the f32 products with this query: its share of
@@ -475,10 +482,7 @@ crate::cpu::dispatched! {
         );
         let mut out = Vec::with_capacity(len);
         for i in 0..len {
-            let q = q_rows.row(match q_map {
-                Some(o) => o[q0 + i],
-                None => q0 + i,
-            });
+            let q = query_row(q_rows, q_map, q0 + i);
             let (qn, mut best) = (work.qn[i], work.best[i]);
             let q_norm = qn.sqrt();
             let g = &gb[i * m..(i + 1) * m];

@@ -145,13 +145,12 @@ crate::cpu::dispatched! {
                 // (The query-time bounds use 1 − η ≤ 1/(1 + η) and 1 + 2η ≥
                 // 1/(1 − η), true for η ≤ 1/2: a ball whose directions are
                 // that far from orthonormal gets none.)
+                // (Directions never found were never measured: their
+                // coordinates stay zero.)
                 if f.sqrt() + 1e-14 > 0.25 {
                     u.fill(0.0);
                     f = 0.0;
-                }
-                // Unused directions (zero) give zero coordinates.
-                for i in 0..TANGENT {
-                    if u[i * d..(i + 1) * d].iter().all(|&v| v == 0.0) {
+                    for i in 0..TANGENT {
                         row_tan[i * nx + start..i * nx + start + len].fill(0.0);
                     }
                 }
