@@ -350,6 +350,9 @@ mod tests {
             .into_iter()
             .filter(|l| l.detected())
             .collect();
+        let _cap = crate::SIMD_CAP_LOCK
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
         for &level in &levels {
             fmaps_simd::set_simd_cap(Some(level));
             for ncols in 1..=LANES {

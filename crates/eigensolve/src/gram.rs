@@ -372,6 +372,9 @@ mod tests {
             .into_iter()
             .filter(|l| l.detected())
             .collect();
+        let _cap = crate::SIMD_CAP_LOCK
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
         for level in &levels {
             fmaps_simd::set_simd_cap(Some(*level));
             assert_eq!(fmaps_simd::simd_level(), *level);

@@ -55,6 +55,12 @@
 #![deny(unsafe_code)]
 
 pub mod conformance;
+
+/// Held by the unit tests that set the process-wide SIMD cap
+/// (`fmaps_simd::set_simd_cap`): tests run on parallel threads, and one
+/// that compares results at a fixed level must not see another change it.
+#[cfg(test)]
+pub(crate) static SIMD_CAP_LOCK: std::sync::Mutex<()> = std::sync::Mutex::new(());
 mod dense;
 mod error;
 mod factor;
