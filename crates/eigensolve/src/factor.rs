@@ -346,15 +346,7 @@ mod tests {
         let st = f.simplicial.as_ref().expect("a simplicial factor");
         let n = problem.n();
         let mut rng = SplitMix(7);
-        let levels: Vec<_> = fmaps_simd::SimdLevel::ALL
-            .into_iter()
-            .filter(|l| l.detected())
-            .collect();
-        let _cap = crate::SIMD_CAP_LOCK
-            .lock()
-            .unwrap_or_else(std::sync::PoisonError::into_inner);
-        for &level in &levels {
-            fmaps_simd::set_simd_cap(Some(level));
+        crate::at_every_simd_level(|level| {
             for ncols in 1..=LANES {
                 let b: Vec<f64> = (0..n * ncols).map(|_| rng.next_f64() - 0.5).collect();
                 let mut ours = b.clone();
@@ -393,15 +385,6 @@ mod tests {
                     );
                 }
             }
-        }
-        fmaps_simd::set_simd_cap(None);
-        let skipped: Vec<&str> = fmaps_simd::SimdLevel::ALL
-            .into_iter()
-            .filter(|l| !l.detected())
-            .map(|l| l.name())
-            .collect();
-        if !skipped.is_empty() {
-            eprintln!("skipped (this CPU lacks them): {skipped:?}");
-        }
+        });
     }
 }

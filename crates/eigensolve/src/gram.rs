@@ -368,16 +368,7 @@ mod tests {
             (40, 401, 3),
             (700, 64, 8),
         ];
-        let levels: Vec<SimdLevel> = SimdLevel::ALL
-            .into_iter()
-            .filter(|l| l.detected())
-            .collect();
-        let _cap = crate::SIMD_CAP_LOCK
-            .lock()
-            .unwrap_or_else(std::sync::PoisonError::into_inner);
-        for level in &levels {
-            fmaps_simd::set_simd_cap(Some(*level));
-            assert_eq!(fmaps_simd::simd_level(), *level);
+        crate::at_every_simd_level(|level| {
             for &(n, cols, b) in &shapes {
                 let v = random(n * cols, 1 + n as u64);
                 let w = random(n * b, 2 + cols as u64);
@@ -412,15 +403,6 @@ mod tests {
                     }
                 }
             }
-        }
-        fmaps_simd::set_simd_cap(None);
-        let skipped: Vec<&str> = SimdLevel::ALL
-            .into_iter()
-            .filter(|l| !l.detected())
-            .map(|l| l.name())
-            .collect();
-        if !skipped.is_empty() {
-            eprintln!("skipped (this CPU lacks them): {skipped:?}");
-        }
+        });
     }
 }

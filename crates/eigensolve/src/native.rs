@@ -24,6 +24,7 @@ use std::time::Instant;
 use faer::linalg::matmul::matmul;
 use faer::reborrow::{Reborrow, ReborrowMut};
 use faer::{Accum, Mat, MatMut, MatRef};
+use fmaps_simd::dot8 as dot;
 use nalgebra::{DMatrix, DVector};
 
 use crate::factor::{Factorization, ShiftInvert, par_of};
@@ -582,26 +583,6 @@ fn gather_columns(u: MatRef<'_, f64>, idx: &[usize]) -> Mat<f64> {
 #[inline(always)]
 fn norm(x: &[f64]) -> f64 {
     dot(x, x).sqrt()
-}
-
-/// `x · y` summed in eight lanes (lane l takes the terms l, l + 8, …,
-/// then a fixed tree): a plain running sum is one chain of dependent
-/// additions, eight lanes are one SIMD register of them.
-#[inline(always)]
-fn dot(x: &[f64], y: &[f64]) -> f64 {
-    let mut l = [0.0f64; 8];
-    let n = x.len().min(y.len());
-    let (xc, yc) = (x[..n].chunks_exact(8), y[..n].chunks_exact(8));
-    let (xr, yr) = (xc.remainder(), yc.remainder());
-    for (a, b) in xc.zip(yc) {
-        for j in 0..8 {
-            l[j] += a[j] * b[j];
-        }
-    }
-    for (j, (a, b)) in xr.iter().zip(yr).enumerate() {
-        l[j] += a * b;
-    }
-    ((l[0] + l[4]) + (l[1] + l[5])) + ((l[2] + l[6]) + (l[3] + l[7]))
 }
 
 /// Orthonormalizes columns `start..start+b` of the column-major `v` (n

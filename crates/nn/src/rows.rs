@@ -217,22 +217,4 @@ pub(crate) fn dist2_below(a: &[f64], b: &[f64], bound: f64) -> Option<f64> {
     (d <= bound).then_some(d)
 }
 
-/// `a · b` (over the shorter length) summed in eight lanes: a plain
-/// running sum of f64 is one dependent chain of additions; eight lanes
-/// vectorize.
-#[inline(always)]
-pub(crate) fn dot8(a: &[f64], b: &[f64]) -> f64 {
-    let mut l = [0.0f64; 8];
-    let n = a.len().min(b.len());
-    let (ac, bc) = (a[..n].chunks_exact(8), b[..n].chunks_exact(8));
-    let (ar, br) = (ac.remainder(), bc.remainder());
-    for (x, y) in ac.zip(bc) {
-        for j in 0..8 {
-            l[j] += x[j] * y[j];
-        }
-    }
-    for (j, (x, y)) in ar.iter().zip(br).enumerate() {
-        l[j] += x * y;
-    }
-    ((l[0] + l[4]) + (l[1] + l[5])) + ((l[2] + l[6]) + (l[3] + l[7]))
-}
+pub(crate) use fmaps_simd::dot8;

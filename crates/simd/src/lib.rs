@@ -179,6 +179,34 @@ pub fn dispatch<K: Kernel>(kernel: K) -> K::Output {
     kernel.run(SimdLevel::Baseline)
 }
 
+/// `a · b` (over the shorter length) summed in eight lanes (lane j takes
+/// the terms j, j + 8, …; then a fixed tree of the lanes): a plain running
+/// sum of f64 is one chain of dependent additions, eight lanes are one
+/// AVX-512 register (two AVX2 ones) of them. No fused multiply-adds: the
+/// same bits at every level. Inline: inside a [`Kernel`] or a
+/// [`dispatched!`] function it is compiled for that level.
+///
+/// ```
+/// let x: Vec<f64> = (0..20).map(f64::from).collect();
+/// assert_eq!(fmaps_simd::dot8(&x, &x), (0..20).map(|i| f64::from(i * i)).sum::<f64>());
+/// ```
+#[inline(always)]
+pub fn dot8(a: &[f64], b: &[f64]) -> f64 {
+    let mut l = [0.0f64; 8];
+    let n = a.len().min(b.len());
+    let (ac, bc) = (a[..n].chunks_exact(8), b[..n].chunks_exact(8));
+    let (ar, br) = (ac.remainder(), bc.remainder());
+    for (x, y) in ac.zip(bc) {
+        for j in 0..8 {
+            l[j] += x[j] * y[j];
+        }
+    }
+    for (j, (x, y)) in ar.iter().zip(br).enumerate() {
+        l[j] += x * y;
+    }
+    ((l[0] + l[4]) + (l[1] + l[5])) + ((l[2] + l[6]) + (l[3] + l[7]))
+}
+
 /// A function compiled three times, for AVX-512, for AVX2 and for baseline
 /// x86-64, and the widest one the CPU has run (see [`has_v4`], [`has_v3`]).
 #[macro_export]
