@@ -41,8 +41,6 @@ pub enum Factorization {
 pub struct ShiftInvert {
     symbolic: SymbolicCholesky<usize>,
     values: Vec<f64>,
-    /// The simplicial factor's structure, for [`solve_rows`].
-    simplicial: Option<Structure>,
     n: usize,
     shift: f64,
     threads: usize,
@@ -136,11 +134,9 @@ impl ShiftInvert {
                 });
             }
         }
-        let simplicial = Structure::of(&symbolic);
         Ok(Self {
             symbolic,
             values,
-            simplicial,
             n,
             shift,
             threads: threads.max(1),
@@ -200,10 +196,10 @@ impl ShiftInvert {
     }
 
     fn solve_seq(&self, rhs: &mut [f64], ncols: usize) {
-        if let Some(st) = &self.simplicial
+        if let Some(st) = Structure::of(&self.symbolic)
             && ncols <= LANES
         {
-            solve_rows(st, &self.values, rhs, ncols);
+            solve_rows(&st, &self.values, rhs, ncols);
             return;
         }
         let mut mem = MemBuffer::new(self.symbolic.solve_in_place_scratch::<f64>(ncols, Par::Seq));
@@ -219,30 +215,32 @@ const LANES: usize = 8;
 
 /// The structure of a simplicial Cholesky factor L (column by column, the
 /// diagonal entry first: faer's layout) and its fill-reducing permutation
-/// (`fwd[i]`: the row of the original matrix that is row i of L's).
-#[derive(Debug)]
-struct Structure {
-    col_ptr: Vec<usize>,
-    row_idx: Vec<usize>,
-    fwd: Vec<usize>,
+/// (`fwd[i]`: the row of the original matrix that is row i of L's; `None`:
+/// the identity), borrowed from faer's symbolic factorization.
+struct Structure<'a> {
+    col_ptr: &'a [usize],
+    row_idx: &'a [usize],
+    fwd: Option<&'a [usize]>,
 }
 
-impl Structure {
-    fn of(symbolic: &SymbolicCholesky<usize>) -> Option<Structure> {
+impl Structure<'_> {
+    /// `None` when the factorization is supernodal.
+    fn of(symbolic: &SymbolicCholesky<usize>) -> Option<Structure<'_>> {
         let faer::sparse::linalg::cholesky::SymbolicCholeskyRaw::Simplicial(s) = symbolic.raw()
         else {
             return None;
         };
-        let n = s.nrows();
-        let fwd = match symbolic.perm() {
-            Some(p) => p.arrays().0.to_vec(),
-            None => (0..n).collect(),
-        };
         Some(Structure {
-            col_ptr: s.col_ptr().to_vec(),
-            row_idx: s.row_idx().to_vec(),
-            fwd,
+            col_ptr: s.col_ptr(),
+            row_idx: s.row_idx(),
+            fwd: symbolic.perm().map(|p| p.arrays().0),
         })
+    }
+
+    /// Row `i` of L's in the original matrix.
+    #[inline(always)]
+    fn original(&self, i: usize) -> usize {
+        self.fwd.map_or(i, |f| f[i])
     }
 }
 
@@ -271,10 +269,10 @@ fmaps_simd::dispatched! {
 /// [`solve_rows`] with rows of `W` ≥ `ncols` lanes.
 #[inline(always)]
 fn solve_rows_of<const W: usize>(st: &Structure, values: &[f64], rhs: &mut [f64], ncols: usize) {
-    let n = st.fwd.len();
+    let n = st.col_ptr.len() - 1;
     let mut y = vec![[0.0f64; W]; n];
     for (i, row) in y.iter_mut().enumerate() {
-        let src = st.fwd[i];
+        let src = st.original(i);
         for c in 0..ncols {
             row[c] = rhs[c * n + src];
         }
@@ -313,7 +311,7 @@ fn solve_rows_of<const W: usize>(st: &Structure, values: &[f64], rhs: &mut [f64]
         }
     }
     for (i, row) in y.iter().enumerate() {
-        let dst = st.fwd[i];
+        let dst = st.original(i);
         for c in 0..ncols {
             rhs[c * n + dst] = row[c];
         }
@@ -343,14 +341,14 @@ mod tests {
         let op = fmaps_laplacian::cotan_laplacian(&mesh, &Default::default());
         let problem = EigenProblem::new(op.stiffness.view(), &op.mass).unwrap();
         let f = ShiftInvert::new(&problem, -0.01, 1, Factorization::Simplicial).unwrap();
-        let st = f.simplicial.as_ref().expect("a simplicial factor");
+        let st = Structure::of(&f.symbolic).expect("a simplicial factor");
         let n = problem.n();
         let mut rng = SplitMix(7);
         crate::at_every_simd_level(|level| {
             for ncols in 1..=LANES {
                 let b: Vec<f64> = (0..n * ncols).map(|_| rng.next_f64() - 0.5).collect();
                 let mut ours = b.clone();
-                solve_rows(st, &f.values, &mut ours, ncols);
+                solve_rows(&st, &f.values, &mut ours, ncols);
                 let mut theirs = b.clone();
                 let mut mem =
                     MemBuffer::new(f.symbolic.solve_in_place_scratch::<f64>(ncols, Par::Seq));

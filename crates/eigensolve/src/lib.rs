@@ -55,34 +55,6 @@
 #![deny(unsafe_code)]
 
 pub mod conformance;
-
-/// Runs `f` at every SIMD level this CPU has, the process-wide cap
-/// (`fmaps_simd::set_simd_cap`) set to it, then lifts the cap and prints
-/// the levels skipped. Under one lock: tests run on parallel threads, and
-/// one that compares results at a fixed level must not see another test
-/// change the level.
-#[cfg(test)]
-pub(crate) fn at_every_simd_level(mut f: impl FnMut(fmaps_simd::SimdLevel)) {
-    use fmaps_simd::{SimdLevel, set_simd_cap, simd_level};
-    static LOCK: std::sync::Mutex<()> = std::sync::Mutex::new(());
-    let _cap = LOCK
-        .lock()
-        .unwrap_or_else(std::sync::PoisonError::into_inner);
-    for level in SimdLevel::ALL.into_iter().filter(|l| l.detected()) {
-        set_simd_cap(Some(level));
-        assert_eq!(simd_level(), level);
-        f(level);
-    }
-    set_simd_cap(None);
-    let skipped: Vec<&str> = SimdLevel::ALL
-        .into_iter()
-        .filter(|l| !l.detected())
-        .map(|l| l.name())
-        .collect();
-    if !skipped.is_empty() {
-        eprintln!("skipped (this CPU lacks them): {skipped:?}");
-    }
-}
 mod dense;
 mod error;
 mod factor;
@@ -343,5 +315,33 @@ impl SpectralBasis {
             mass: self.mass.clone(),
             report,
         }
+    }
+}
+
+/// Runs `f` at every SIMD level this CPU has, the process-wide cap
+/// (`fmaps_simd::set_simd_cap`) set to it, then lifts the cap and prints
+/// the levels skipped. Under one lock: tests run on parallel threads, and
+/// one that compares results at a fixed level must not see another test
+/// change the level.
+#[cfg(test)]
+pub(crate) fn at_every_simd_level(mut f: impl FnMut(fmaps_simd::SimdLevel)) {
+    use fmaps_simd::{SimdLevel, set_simd_cap, simd_level};
+    static LOCK: std::sync::Mutex<()> = std::sync::Mutex::new(());
+    let _cap = LOCK
+        .lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner);
+    for level in SimdLevel::ALL.into_iter().filter(|l| l.detected()) {
+        set_simd_cap(Some(level));
+        assert_eq!(simd_level(), level);
+        f(level);
+    }
+    set_simd_cap(None);
+    let skipped: Vec<&str> = SimdLevel::ALL
+        .into_iter()
+        .filter(|l| !l.detected())
+        .map(|l| l.name())
+        .collect();
+    if !skipped.is_empty() {
+        eprintln!("skipped (this CPU lacks them): {skipped:?}");
     }
 }
