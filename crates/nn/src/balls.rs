@@ -223,6 +223,9 @@ impl BallData {
         };
         let mut q32: Vec<f32> = Vec::with_capacity(nq * self.d);
         for t in 0..nq {
+            if t + 4 < nq {
+                fmaps_simd::prefetch(query_row(q_src, q_map, t + 4));
+            }
             let row = query_row(q_src, q_map, t);
             q32.extend(row.iter().map(|&v| v as f32));
         }
@@ -381,6 +384,17 @@ crate::cpu::dispatched! {
         work.p_list.clear();
         work.p_start.clear();
         for i in 0..len {
+            // The rows of a query ahead and of its guess (gathered from
+            // anywhere: the hardware prefetcher cannot see them coming).
+            if i + 2 < len {
+                fmaps_simd::prefetch(query_row(q_rows, q_map, q0 + i + 2));
+                if let Some(&h) = hint.and_then(|h| h.get(q0 + i + 2))
+                    && h < nx
+                {
+                    let p = this.pos_of[h] as usize;
+                    fmaps_simd::prefetch(&this.x_ord[p * d..(p + 1) * d]);
+                }
+            }
             let q = query_row(q_rows, q_map, q0 + i);
             let qn = dot(q, q);
             work.qn[i] = qn;

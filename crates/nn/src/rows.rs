@@ -80,6 +80,10 @@ impl<'a> Rows<'a> {
         let n = order.map_or(self.n, <[usize]>::len);
         let mut out = Vec::with_capacity(n * self.d);
         for p in 0..n {
+            // A row a few ahead, from anywhere in the rows: requested now.
+            if let Some(&i) = order.and_then(|o| o.get(p + 4)) {
+                fmaps_simd::prefetch(self.row(i));
+            }
             let src = self.row(order.map_or(p, |o| o[p]));
             match scale {
                 Some(s) => out.extend(src.iter().map(|v| v * s)),

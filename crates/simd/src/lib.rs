@@ -179,6 +179,37 @@ pub fn dispatch<K: Kernel>(kernel: K) -> K::Output {
     kernel.run(SimdLevel::Baseline)
 }
 
+/// Asks the CPU to bring the cache lines of `data` into its caches (a
+/// hint, e.g. for a row about to be gathered from anywhere in a large
+/// matrix: the hardware prefetcher cannot guess such an address); no
+/// effect on any result, nothing on targets without a prefetch
+/// instruction here.
+///
+/// ```
+/// let row = vec![1.0f64; 150];
+/// fmaps_simd::prefetch(&row);
+/// assert_eq!(row.iter().sum::<f64>(), 150.0);
+/// ```
+#[inline(always)]
+pub fn prefetch<T>(data: &[T]) {
+    #[cfg(target_arch = "x86_64")]
+    {
+        let bytes = std::mem::size_of_val(data);
+        let p = data.as_ptr().cast::<i8>();
+        let mut off = 0;
+        while off < bytes {
+            // SAFETY: SSE is part of x86-64's baseline; a prefetch reads
+            // nothing and cannot fault (the address is inside `data`).
+            unsafe {
+                std::arch::x86_64::_mm_prefetch::<{ std::arch::x86_64::_MM_HINT_T0 }>(p.add(off));
+            }
+            off += 64;
+        }
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    let _ = data;
+}
+
 /// `a · b` (over the shorter length) summed in eight lanes (lane j takes
 /// the terms j, j + 8, …; then a fixed tree of the lanes): a plain running
 /// sum of f64 is one chain of dependent additions, eight lanes are one

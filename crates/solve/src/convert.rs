@@ -381,21 +381,117 @@ pub fn pullback_update(
         old += delta;
     }
     if ka > kap || kb > kbp {
-        let w = gathered(t_ba, phi_a, ka, Some(mass_b));
-        let w = MatRef::from_row_major_slice(&w, n, ka);
-        let b = phi_b.view(kb);
-        if ka > kap {
-            // New columns, every row.
-            let cols = inner(b, w.subcols(kap, ka - kap));
-            c.view_mut((0, kap), (kb, ka - kap)).copy_from(&cols);
-        }
-        if kb > kbp && kap > 0 {
-            // New rows, the old columns.
-            let rows = inner(b.subcols(kbp, kb - kbp), w.subcols(0, kap));
+        // The new columns (every row) and the new rows (the old columns).
+        let (cols, rows) = border(t_ba, phi_a, (kap, ka), phi_b, (kbp, kb), mass_b);
+        c.view_mut((0, kap), (kb, ka - kap)).copy_from(&cols);
+        if let Some(rows) = rows {
             c.view_mut((kbp, 0), (kb - kbp, kap)).copy_from(&rows);
         }
     }
     Ok(c)
+}
+
+/// The border of [`pullback`] that [`pullback_update`] adds to the
+/// previous block, with `w_y = m_y Φ_A(t(y))` (the mass-weighted rows of
+/// [`pullback`]'s product): the new columns `Σ_y Φ_B(y)[:kb]ᵀ w_y[kap:ka]`
+/// (`kb x (ka − kap)`) and the new rows `Σ_y Φ_B(y)[kbp:kb]ᵀ w_y[:kap]`
+/// (`(kb − kbp) x kap`, `None` when empty).
+/// Both are thin, and neither gathers whole rows of A (a random read of
+/// `ka` values per vertex of B, what bounds [`pullback`]): the columns read
+/// the few new coordinates of each `t(y)`, summed over fixed chunks of
+/// [`INNER_CHUNK`] vertices of B in parallel, the chunks then in order;
+/// the rows first scatter `m_y Φ_B(y)[kbp:kb]` onto the vertices of A
+/// (in vertex order), then take one product with A's rows read in order
+/// ([`inner`]). Independent of the thread count.
+fn border(
+    t_ba: &[usize],
+    phi_a: &BasisRows,
+    (kap, ka): (usize, usize),
+    phi_b: &BasisRows,
+    (kbp, kb): (usize, usize),
+    mass_b: &[f64],
+) -> (DMatrix<f64>, Option<DMatrix<f64>>) {
+    let (dn, db) = (ka - kap, kb - kbp);
+    let n = t_ba.len();
+    let mut cols = vec![0.0; dn * kb];
+    if dn > 0 && kb > 0 {
+        let starts: Vec<usize> = (0..n).step_by(INNER_CHUNK).collect();
+        let parts: Vec<Vec<f64>> = starts
+            .par_iter()
+            .map(|&y0| {
+                fmaps_simd::dispatch(NewColumns {
+                    t_ba,
+                    phi_a,
+                    phi_b,
+                    mass_b,
+                    ys: y0..(y0 + INNER_CHUNK).min(n),
+                    a: (kap, ka),
+                    kb,
+                })
+            })
+            .collect();
+        for part in &parts {
+            for (x, v) in cols.iter_mut().zip(part) {
+                *x += v;
+            }
+        }
+    }
+    // p(x) = Σ_{y: t(y) = x} m_y Φ_B(y)[kbp:kb], one row per vertex of A.
+    let rows = (db > 0 && kap > 0).then(|| {
+        let mut p = vec![0.0; phi_a.n() * db];
+        for (y, &x) in t_ba.iter().enumerate() {
+            let (m, b) = (mass_b[y], &phi_b.row(y, kb)[kbp..]);
+            for (acc, &v) in p[x * db..(x + 1) * db].iter_mut().zip(b) {
+                *acc += m * v;
+            }
+        }
+        inner(
+            MatRef::from_row_major_slice(&p, phi_a.n(), db),
+            phi_a.view(kap),
+        )
+    });
+    (DMatrix::from_column_slice(kb, dn, &cols), rows)
+}
+
+/// One chunk of [`border`]'s new columns: plain products and sums in
+/// vertex order (no fused multiply-adds: the same bits at every SIMD
+/// level).
+struct NewColumns<'a> {
+    t_ba: &'a [usize],
+    phi_a: &'a BasisRows,
+    phi_b: &'a BasisRows,
+    mass_b: &'a [f64],
+    ys: std::ops::Range<usize>,
+    a: (usize, usize),
+    kb: usize,
+}
+
+impl fmaps_simd::Kernel for NewColumns<'_> {
+    type Output = Vec<f64>;
+
+    #[inline(always)]
+    fn run(self, _level: fmaps_simd::SimdLevel) -> Vec<f64> {
+        let ((kap, ka), kb) = (self.a, self.kb);
+        let mut cols = vec![0.0; (ka - kap) * kb];
+        let end = self.ys.end;
+        for y in self.ys {
+            // The coordinates of an image a few vertices ahead (anywhere in
+            // A's rows): requested now.
+            if y + 8 < end {
+                fmaps_simd::prefetch(&self.phi_a.row(self.t_ba[y + 8], ka)[kap..]);
+            }
+            let m = self.mass_b[y];
+            let a = &self.phi_a.row(self.t_ba[y], ka)[kap..];
+            let b = self.phi_b.row(y, kb);
+            for (acc, &v) in cols.chunks_exact_mut(kb).zip(a) {
+                let s = m * v;
+                for (x, &u) in acc.iter_mut().zip(b) {
+                    *x += u * s;
+                }
+            }
+        }
+        cols
+    }
 }
 
 /// `Φ_B[:, :kb]ᵀ Π_BA Φ_A[:, :ka]` without the mass: the right-hand side
