@@ -329,8 +329,10 @@ struct BallWork {
     q_err: Vec<f64>,
     t_err: Vec<f64>,
     best: Vec<(f64, usize)>,
-    /// Balls to visit: (bound², ball, tangent data).
-    visit: Vec<(f64, u32, Tangent)>,
+    /// Balls to visit: their tangent data, and (bound², ball, position in
+    /// `tangents`) to sort (small entries: cheap to move).
+    tangents: Vec<Tangent>,
+    visit: Vec<(f64, u32, u32)>,
     /// Per row of a visited ball: its lower bound².
     row_lb: Vec<f64>,
 }
@@ -350,6 +352,7 @@ impl BallWork {
             q_err: vec![0.0; QUERY_BLOCK],
             t_err: vec![0.0; QUERY_BLOCK],
             best: vec![(0.0, 0); QUERY_BLOCK],
+            tangents: Vec::new(),
             visit: Vec::new(),
             row_lb: Vec::new(),
         }
@@ -502,6 +505,7 @@ crate::cpu::dispatched! {
             let g = &gb[i * m..(i + 1) * m];
             let tcol = &work.tq.col_as_slice(i)[..n_cand * TANGENT];
             work.visit.clear();
+            work.tangents.clear();
             for pi in work.p_start[i]..work.p_start[i + 1] {
                 let j = work.p_list[pi] as usize;
                 let s = work.slot[j] as usize;
@@ -517,15 +521,17 @@ crate::cpu::dispatched! {
                     tangent_bound(this, j, (qn, q_norm), f64::from(g[j]), &uq, err, sl, best.0)
                     && tb.lb2 <= best.0
                 {
-                    work.visit.push((tb.lb2, j as u32, tb));
+                    work.visit.push((tb.lb2, j as u32, work.tangents.len() as u32));
+                    work.tangents.push(tb);
                 }
             }
             sort_visits(&mut work.visit);
             for v in 0..work.visit.len() {
-                let (lb2, j, tb) = work.visit[v];
+                let (lb2, j, at) = work.visit[v];
                 if lb2 > best.0 {
                     break;
                 }
+                let tb = work.tangents[at as usize];
                 let (start, l) = this.ranges[j as usize];
                 let tol = tb.eps + sl * this.geo.radii[j as usize];
                 // Each row's own bound, branch-free across the ball: its
@@ -577,7 +583,7 @@ crate::cpu::dispatched! {
 /// query usually visits (no call, no comparator), the library's sort for
 /// more.
 #[inline(always)]
-fn sort_visits(visit: &mut [(f64, u32, Tangent)]) {
+fn sort_visits(visit: &mut [(f64, u32, u32)]) {
     if visit.len() > 16 {
         visit.sort_unstable_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
         return;
