@@ -71,7 +71,7 @@ const K_MIN: usize = 6;
 /// ARAP Gram matrix of X.
 #[derive(Clone, Copy)]
 struct Main<'a> {
-    samples: (&'a Samples, &'a Samples),
+    samples: (&'a Samples<'a>, &'a Samples<'a>),
     gram: &'a DMatrix<f64>,
 }
 
@@ -559,8 +559,8 @@ impl SmoothShells {
         let shell = x.shell(&wk);
         let cur = level::Posed::new(x.deform(&shell, &state.tau, fm.k), x.faces);
         let ys = level::Posed::new(y.shell(&wk), y.faces);
-        let all_x = Samples::new(x, (0..x.verts.len()).collect());
-        let all_y = Samples::new(y, (0..y.verts.len()).collect());
+        let all_x = Samples::all(x);
+        let all_y = Samples::all(y);
         let (_, t_ba) = level::correspondences(
             &cur,
             &ys,

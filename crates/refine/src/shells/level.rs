@@ -228,26 +228,38 @@ impl Posed {
 
 /// Sample vertices of a shape (`Deref` to their indices) with their rows
 /// of Φ, gathered once: every level reads them for its correspondences and
-/// fits, and rows of the whole Φ would be a cache miss each.
-pub(crate) struct Samples {
+/// fits, and rows of the whole Φ would be a cache miss each. Every vertex
+/// ([`Samples::all`]) borrows Φ itself (a copy would be n x K).
+pub(crate) struct Samples<'a> {
     pub idx: Vec<usize>,
     /// `Φ[idx, :]` (samples x K).
-    pub phi: DMatrix<f64>,
+    pub phi: std::borrow::Cow<'a, DMatrix<f64>>,
     /// `√M` at the samples.
     pub sqrt_mass: Vec<f64>,
 }
 
-impl Samples {
-    pub fn new(s: &Shell<'_>, idx: Vec<usize>) -> Samples {
+impl<'a> Samples<'a> {
+    pub fn new(s: &Shell<'_>, idx: Vec<usize>) -> Samples<'a> {
         Samples {
-            phi: DMatrix::from_fn(idx.len(), s.phi.ncols(), |r, c| s.phi[(idx[r], c)]),
+            phi: std::borrow::Cow::Owned(DMatrix::from_fn(idx.len(), s.phi.ncols(), |r, c| {
+                s.phi[(idx[r], c)]
+            })),
             sqrt_mass: idx.iter().map(|&i| s.mass[i].sqrt()).collect(),
             idx,
         }
     }
+
+    /// Every vertex of `s`, in order (Φ borrowed).
+    pub fn all(s: &Shell<'a>) -> Samples<'a> {
+        Samples {
+            phi: std::borrow::Cow::Borrowed(s.phi),
+            sqrt_mass: s.mass.iter().map(|m| m.sqrt()).collect(),
+            idx: (0..s.verts.len()).collect(),
+        }
+    }
 }
 
-impl std::ops::Deref for Samples {
+impl std::ops::Deref for Samples<'_> {
     type Target = [usize];
     fn deref(&self) -> &[usize] {
         &self.idx
