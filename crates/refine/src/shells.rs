@@ -610,6 +610,16 @@ impl SmoothShells {
     }
 }
 
+/// The first `k` eigenvectors of `b`: borrowed when that is all of them
+/// (an n x k copy otherwise).
+fn first_columns(b: &SpectralBasis, k: usize) -> std::borrow::Cow<'_, DMatrix<f64>> {
+    if b.eigenvectors.ncols() == k {
+        std::borrow::Cow::Borrowed(&b.eigenvectors)
+    } else {
+        std::borrow::Cow::Owned(b.eigenvectors.columns(0, k).into_owned())
+    }
+}
+
 impl Refiner for SmoothShells {
     fn name(&self) -> String {
         let screen = if self.screen > self.orientations.max(1) {
@@ -657,10 +667,9 @@ impl Refiner for SmoothShells {
         crate::check_geometry(basis_a, basis_b, &geo_a, &geo_b)?;
         let mut report = RefineReport::start(self.name());
         let kt = self.k_max + 9;
-        let (pa, pb) = (
-            basis_a.eigenvectors.columns(0, kt).into_owned(),
-            basis_b.eigenvectors.columns(0, kt).into_owned(),
-        );
+        // The first kt eigenvectors (borrowed when that is all of them:
+        // an n x kt copy per shape otherwise).
+        let (pa, pb) = (first_columns(basis_a, kt), first_columns(basis_b, kt));
         let mut x = Shell::new(
             geo_a.vertices,
             geo_a.faces,
