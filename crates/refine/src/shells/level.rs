@@ -2,7 +2,7 @@
 //! correspondences, deformation and functional map; the geometry helpers
 //! (normals, ARAP rotations) it needs.
 
-use faer::Mat;
+use faer::{Mat, MatRef};
 use fmaps_nn::{NnParams, nearest_rows};
 use nalgebra::{DMatrix, Matrix3, Vector3};
 
@@ -373,11 +373,28 @@ pub(crate) struct Alignment {
     pub cfix: Option<DMatrix<f64>>,
 }
 
-/// Brute force: on these product embeddings (a few thousand rows, 6 to
-/// 200+ columns) it measured twice as fast as the tree the automatic
-/// choice takes.
-fn brute() -> NnParams {
-    NnParams::with_strategy(fmaps_nn::NnStrategy::Brute)
+/// Rows of a product embedding from which [`search_params`] takes the
+/// ball search: above the default samples (2000), so the final point map
+/// on every vertex (FAUST pairs, two threads: neutral at 5k
+/// vertices, 7.9 → 6.4 s of refinement at 20k, 44 → 17 s at 80k, the
+/// same maps).
+const BALLS_FROM_ROWS: usize = 4096;
+
+/// The search among the rows `data` of a product embedding. On the
+/// samples (a few thousand rows, 6 to 200+ columns) brute force: it
+/// measured twice as fast as the tree the automatic choice takes. From
+/// [`BALLS_FROM_ROWS`] rows (the final point map on every vertex),
+/// without matrix tiles, the ball search (exact: the same answers) over
+/// k-means clusters sized for one search without guesses
+/// ([`fmaps_nn::Partition::for_one_search`]): positions, normals and
+/// spectral features are smooth on the surface, so the clusters are
+/// compact (FAUST pair subdivided twice, 80k vertices, 197 columns: brute
+/// force compared all 6.4·10⁹ pairs per finalist).
+fn search_params(data: MatRef<'_, f64>) -> NnParams {
+    match fmaps_nn::Partition::for_one_search(data, BALLS_FROM_ROWS) {
+        Some(p) => NnParams::with_strategy(fmaps_nn::NnStrategy::Balls).with_partition(p),
+        None => NnParams::with_strategy(fmaps_nn::NnStrategy::Brute),
+    }
 }
 
 /// Correspondences of the samples in the product embedding: for each X
@@ -409,7 +426,8 @@ pub(crate) fn correspondences(
     let ey = embed(sy, &py.pts, &py.nrm, fnm, fy);
     let t = std::time::Instant::now();
     let search = |d: &Mat<f64>, q: &Mat<f64>| {
-        nearest_rows(d.as_ref(), q.as_ref(), None, &brute()).map_err(fmaps_solve::Error::Search)
+        nearest_rows(d.as_ref(), q.as_ref(), None, &search_params(d.as_ref()))
+            .map_err(fmaps_solve::Error::Search)
     };
     let (ab, ba) = if both {
         report.nn_searches += 2;
@@ -674,5 +692,45 @@ mod tests {
         assert_eq!(w.len(), 7);
         assert!((w[3] - 0.5).abs() < 1e-12 && (w[6] - 0.01).abs() < 1e-9);
         assert_eq!(shell_weights(1), vec![1.0]);
+    }
+
+    /// The final point map's search on many rows (the ball search where
+    /// it pays) answers as brute force does: rows of a product embedding
+    /// of a sphere (points, normals, smooth "spectral" features), queries
+    /// from a perturbed copy.
+    #[test]
+    fn the_search_on_every_vertex_agrees_with_brute_force() {
+        let n = BALLS_FROM_ROWS + 904;
+        let embed = |shift: f64| {
+            Mat::from_fn(n, 3 + 3 + 20, |i, c| {
+                // A Fibonacci sphere: evenly spread points.
+                let z = 1.0 - 2.0 * (i as f64 + 0.5) / n as f64;
+                let t = i as f64 * 2.399_963_229_728_653 + shift;
+                let r = (1.0 - z * z).sqrt();
+                let p = [r * t.cos(), r * t.sin(), z];
+                match c {
+                    0..3 => p[c],
+                    3..6 => 0.3 * p[c - 3],
+                    _ => 0.2 * ((c - 5) as f64 * (p[0] + 0.5 * p[1]) + shift).sin(),
+                }
+            })
+        };
+        let (data, queries) = (embed(0.0), embed(0.013));
+        let params = search_params(data.as_ref());
+        if params.strategy != fmaps_nn::NnStrategy::Balls {
+            eprintln!(
+                "skipped: the ball search is not chosen on this CPU (matrix tiles) or with \
+                 FMAPS_NO_BALLS; brute force alone was compared with itself"
+            );
+        }
+        let got = nearest_rows(data.as_ref(), queries.as_ref(), None, &params).unwrap();
+        let want = nearest_rows(
+            data.as_ref(),
+            queries.as_ref(),
+            None,
+            &NnParams::with_strategy(fmaps_nn::NnStrategy::Brute),
+        )
+        .unwrap();
+        assert_eq!(got, want);
     }
 }
