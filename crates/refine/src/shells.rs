@@ -557,13 +557,13 @@ impl SmoothShells {
         let fm = state.fmap.as_ref().expect("at least one level ran");
         let wk = level::shell_weights(k);
         let shell = x.shell(&wk);
-        let cur = level::Posed::new(x.deform(&shell, &state.tau, fm.k), x.faces);
-        let ys = level::Posed::new(y.shell(&wk), y.faces);
+        let cur = level::Posed::new(x.deform(&shell, &state.tau, fm.k), x.faces, x.orient);
+        let ys = level::Posed::new(y.shell(&wk), y.faces, y.orient);
         let all_x = Samples::all(x);
         let all_y = Samples::all(y);
         let (_, t_ba) = level::correspondences(
-            &cur,
-            &ys,
+            &cur.at(&all_x),
+            &ys.at(&all_y),
             (&all_x, &all_y),
             &LevelWeights::MAIN,
             Some(fm),

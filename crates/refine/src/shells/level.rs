@@ -41,6 +41,9 @@ pub(crate) struct Shell<'a> {
     pub xi: DMatrix<f64>,
     /// Per vertex, the neighbours (for ARAP).
     pub neighbours: Vec<Vec<usize>>,
+    /// The sign orienting its normals outwards ([`orientation`] of
+    /// `verts`; a reflection flips it).
+    pub orient: f64,
 }
 
 impl<'a> Shell<'a> {
@@ -82,7 +85,9 @@ impl<'a> Shell<'a> {
             evals: evals.iter().map(|l| l * total).collect(),
             xi: DMatrix::zeros(0, 3),
             neighbours,
+            orient: 1.0,
         };
+        shell.orient = orientation(&shell.verts, faces);
         shell.update_xi();
         shell
     }
@@ -106,6 +111,7 @@ impl<'a> Shell<'a> {
             let p = r * Vector3::new(v[0], v[1], v[2]);
             *v = [p[0], p[1], p[2]];
         }
+        self.orient = orientation(&self.verts, self.faces);
         self.update_xi();
     }
 
@@ -180,35 +186,54 @@ fn v3(p: [f64; 3]) -> Vector3<f64> {
     Vector3::new(p[0], p[1], p[2])
 }
 
-/// Area-weighted vertex normals, oriented outwards (a closed mesh whose
-/// signed volume is negative has its normals flipped).
-pub(crate) fn normals(verts: &[[f64; 3]], faces: &[[usize; 3]]) -> Vec<[f64; 3]> {
-    let sub = |p: [f64; 3], q: [f64; 3]| [p[0] - q[0], p[1] - q[1], p[2] - q[2]];
-    let cross = |p: [f64; 3], q: [f64; 3]| {
-        [
-            p[1] * q[2] - p[2] * q[1],
-            p[2] * q[0] - p[0] * q[2],
-            p[0] * q[1] - p[1] * q[0],
-        ]
-    };
-    let mut n = vec![[0.0f64; 3]; verts.len()];
+fn sub(p: [f64; 3], q: [f64; 3]) -> [f64; 3] {
+    [p[0] - q[0], p[1] - q[1], p[2] - q[2]]
+}
+
+fn cross(p: [f64; 3], q: [f64; 3]) -> [f64; 3] {
+    [
+        p[1] * q[2] - p[2] * q[1],
+        p[2] * q[0] - p[0] * q[2],
+        p[0] * q[1] - p[1] * q[0],
+    ]
+}
+
+/// The sign that orients a mesh's normals outwards: −1 when its signed
+/// volume is negative (a closed mesh whose faces turn inwards), else 1.
+/// A shape's shells and deformations keep its faces' orientation, so the
+/// sign is the shape's own ([`Shell::orient`]), computed once.
+pub(crate) fn orientation(verts: &[[f64; 3]], faces: &[[usize; 3]]) -> f64 {
     let mut volume = 0.0;
     for f in faces {
         let (a, b, c) = (verts[f[0]], verts[f[1]], verts[f[2]]);
-        let fnrm = cross(sub(b, a), sub(c, a));
         let bc = cross(b, c);
         volume += a[0] * bc[0] + a[1] * bc[1] + a[2] * bc[2];
+    }
+    if volume < 0.0 { -1.0 } else { 1.0 }
+}
+
+/// `n` scaled to length 1 and oriented by `sign` (0 for a zero vector).
+fn unit(n: [f64; 3], sign: f64) -> [f64; 3] {
+    let l = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
+    let s = if l > 0.0 { sign / l } else { 0.0 };
+    [n[0] * s, n[1] * s, n[2] * s]
+}
+
+/// Area-weighted vertex normals (each vertex's faces' cross products
+/// summed in face order), oriented by `sign` ([`orientation`]).
+pub(crate) fn normals(verts: &[[f64; 3]], faces: &[[usize; 3]], sign: f64) -> Vec<[f64; 3]> {
+    let mut n = vec![[0.0f64; 3]; verts.len()];
+    for f in faces {
+        let (a, b, c) = (verts[f[0]], verts[f[1]], verts[f[2]]);
+        let fnrm = cross(sub(b, a), sub(c, a));
         for &i in f {
             for d in 0..3 {
                 n[i][d] += fnrm[d];
             }
         }
     }
-    let sign = if volume < 0.0 { -1.0 } else { 1.0 };
     for v in &mut n {
-        let l = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
-        let s = if l > 0.0 { sign / l } else { 0.0 };
-        *v = [v[0] * s, v[1] * s, v[2] * s];
+        *v = unit(*v, sign);
     }
     n
 }
@@ -220,9 +245,116 @@ pub(crate) struct Posed {
 }
 
 impl Posed {
-    pub fn new(pts: Vec<[f64; 3]>, faces: &[[usize; 3]]) -> Posed {
-        let nrm = normals(&pts, faces);
+    /// `pts` with their normals on `faces`, oriented by `sign`.
+    pub fn new(pts: Vec<[f64; 3]>, faces: &[[usize; 3]], sign: f64) -> Posed {
+        let nrm = normals(&pts, faces, sign);
         Posed { pts, nrm }
+    }
+
+    /// The points and normals at the samples `s` (borrowed when `s` is
+    /// every vertex: [`Samples::all`]).
+    pub fn at<'p>(&'p self, s: &Samples) -> AtSamples<'p> {
+        use std::borrow::Cow;
+        if s.len() == self.pts.len() {
+            // Sorted distinct vertices, as many as there are: all, in order.
+            return AtSamples {
+                pts: Cow::Borrowed(&self.pts),
+                nrm: Cow::Borrowed(&self.nrm),
+            };
+        }
+        let gather = |v: &[[f64; 3]]| {
+            if v.is_empty() {
+                Vec::new()
+            } else {
+                s.iter().map(|&i| v[i]).collect()
+            }
+        };
+        AtSamples {
+            pts: Cow::Owned(gather(&self.pts)),
+            nrm: Cow::Owned(gather(&self.nrm)),
+        }
+    }
+}
+
+/// Points and normals of a shape at its samples, in sample order (the
+/// normals empty where their weight is 0).
+pub(crate) struct AtSamples<'p> {
+    pub pts: std::borrow::Cow<'p, [[f64; 3]]>,
+    pub nrm: std::borrow::Cow<'p, [[f64; 3]]>,
+}
+
+/// The samples' one-ring: what the points and normals at the samples need
+/// of a shape (the positions of the samples and their neighbours, the
+/// samples' faces), so that the levels that need nothing else (no ARAP)
+/// and the energies deform and orient a few thousand vertices instead of
+/// all of them (80k-vertex meshes: ~1000-2000 samples, ~7 vertices each).
+struct Ring {
+    /// The samples and their neighbours, ascending.
+    verts: Vec<usize>,
+    /// `Φ[verts, :]`.
+    phi: DMatrix<f64>,
+    /// Each sample's position in `verts`.
+    at: Vec<u32>,
+    /// Each sample's faces in face order (sample `i`'s from
+    /// `face_start[i]` to `face_start[i + 1]`), as positions in `verts`.
+    face_start: Vec<usize>,
+    faces: Vec<[u32; 3]>,
+}
+
+impl Ring {
+    /// The ring of the samples `idx` of `s` (sorted, distinct), or `None`
+    /// when it holds more than half the vertices (then every vertex is as
+    /// cheap).
+    fn new(s: &Shell<'_>, idx: &[usize]) -> Option<Ring> {
+        let n = s.verts.len();
+        let mut pos = vec![u32::MAX; n];
+        for &i in idx {
+            pos[i] = 0;
+            for &j in &s.neighbours[i] {
+                pos[j] = 0;
+            }
+        }
+        let verts: Vec<usize> = (0..n).filter(|&i| pos[i] == 0).collect();
+        if 2 * verts.len() > n {
+            return None;
+        }
+        for (p, &v) in verts.iter().enumerate() {
+            pos[v] = p as u32;
+        }
+        let mut sample_of = vec![u32::MAX; n];
+        for (k, &i) in idx.iter().enumerate() {
+            sample_of[i] = k as u32;
+        }
+        // Each sample's faces, in face order (a counting sort by sample).
+        let mut face_start = vec![0usize; idx.len() + 1];
+        for f in s.faces {
+            for &i in f {
+                if sample_of[i] != u32::MAX {
+                    face_start[sample_of[i] as usize + 1] += 1;
+                }
+            }
+        }
+        for k in 0..idx.len() {
+            face_start[k + 1] += face_start[k];
+        }
+        let mut next = face_start.clone();
+        let mut faces = vec![[0u32; 3]; face_start[idx.len()]];
+        for f in s.faces {
+            for &i in f {
+                if sample_of[i] != u32::MAX {
+                    let k = sample_of[i] as usize;
+                    faces[next[k]] = [pos[f[0]], pos[f[1]], pos[f[2]]];
+                    next[k] += 1;
+                }
+            }
+        }
+        Some(Ring {
+            phi: DMatrix::from_fn(verts.len(), s.phi.ncols(), |r, c| s.phi[(verts[r], c)]),
+            at: idx.iter().map(|&i| pos[i]).collect(),
+            verts,
+            face_start,
+            faces,
+        })
     }
 }
 
@@ -236,15 +368,19 @@ pub(crate) struct Samples<'a> {
     pub phi: std::borrow::Cow<'a, DMatrix<f64>>,
     /// `√M` at the samples.
     pub sqrt_mass: Vec<f64>,
+    /// Their one-ring, where it is small ([`Samples::pose`]).
+    ring: Option<Ring>,
 }
 
 impl<'a> Samples<'a> {
+    /// The samples `idx` (sorted, distinct) of `s`.
     pub fn new(s: &Shell<'_>, idx: Vec<usize>) -> Samples<'a> {
         Samples {
             phi: std::borrow::Cow::Owned(DMatrix::from_fn(idx.len(), s.phi.ncols(), |r, c| {
                 s.phi[(idx[r], c)]
             })),
             sqrt_mass: idx.iter().map(|&i| s.mass[i].sqrt()).collect(),
+            ring: Ring::new(s, &idx),
             idx,
         }
     }
@@ -255,6 +391,81 @@ impl<'a> Samples<'a> {
             phi: std::borrow::Cow::Borrowed(s.phi),
             sqrt_mass: s.mass.iter().map(|m| m.sqrt()).collect(),
             idx: (0..s.verts.len()).collect(),
+            ring: None,
+        }
+    }
+
+    /// The points `base + Φ[:, :k] τ[:k]` of `s` (`base` without `tau`;
+    /// the same numbers as [`Shell::deform`]) at the samples, with their
+    /// normals when `normals` (else none), oriented by `s.orient`: on the
+    /// samples' one-ring only where it is small, else on every vertex.
+    pub fn pose(
+        &self,
+        s: &Shell<'_>,
+        base: &[[f64; 3]],
+        tau: Option<(&DMatrix<f64>, usize)>,
+        normals: bool,
+    ) -> AtSamples<'static> {
+        use std::borrow::Cow;
+        let Some(ring) = &self.ring else {
+            let pts = match tau {
+                Some((t, k)) => s.deform(base, t, k),
+                None => base.to_vec(),
+            };
+            let posed = if normals {
+                Posed::new(pts, s.faces, s.orient)
+            } else {
+                Posed {
+                    pts,
+                    nrm: Vec::new(),
+                }
+            };
+            let at = posed.at(self);
+            return AtSamples {
+                pts: Cow::Owned(at.pts.into_owned()),
+                nrm: Cow::Owned(at.nrm.into_owned()),
+            };
+        };
+        // The ring's points: each row of Φ τ by the same GEMM as every
+        // vertex's (a row's products do not depend on the other rows).
+        let p: Vec<[f64; 3]> = match tau {
+            Some((t, k)) => {
+                let k = k.min(t.nrows()).min(ring.phi.ncols());
+                let d = mul_ref(view(&ring.phi, k), false, view(t, 3).subrows(0, k));
+                ring.verts
+                    .iter()
+                    .enumerate()
+                    .map(|(r, &v)| {
+                        let b = base[v];
+                        [b[0] + d[(r, 0)], b[1] + d[(r, 1)], b[2] + d[(r, 2)]]
+                    })
+                    .collect()
+            }
+            None => ring.verts.iter().map(|&v| base[v]).collect(),
+        };
+        let pts = ring.at.iter().map(|&r| p[r as usize]).collect();
+        let nrm = if normals {
+            // Each sample's faces' cross products summed in face order, as
+            // [`normals`] sums them.
+            (0..self.len())
+                .map(|i| {
+                    let mut n = [0.0f64; 3];
+                    for f in &ring.faces[ring.face_start[i]..ring.face_start[i + 1]] {
+                        let (a, b, c) = (p[f[0] as usize], p[f[1] as usize], p[f[2] as usize]);
+                        let fnrm = cross(sub(b, a), sub(c, a));
+                        for d in 0..3 {
+                            n[d] += fnrm[d];
+                        }
+                    }
+                    unit(n, s.orient)
+                })
+                .collect()
+        } else {
+            Vec::new()
+        };
+        AtSamples {
+            pts: Cow::Owned(pts),
+            nrm: Cow::Owned(nrm),
         }
     }
 }
@@ -269,14 +480,13 @@ impl std::ops::Deref for Samples<'_> {
 /// The normals' weight in the product space: `normals` times the ratio
 /// of the coordinates' to the normals' norms on the samples, averaged
 /// over both shapes.
-fn normal_scale(px: &Posed, py: &Posed, sx: &[usize], sy: &[usize], normals: f64) -> f64 {
+fn normal_scale(px: &AtSamples, py: &AtSamples, normals: f64) -> f64 {
     if normals == 0.0 {
         // The normals may not have been computed (see [`level`]).
         return 0.0;
     }
-    let part =
-        |p: &Posed, s: &[usize]| normals * frob(&p.pts, s) / frob(&p.nrm, s).max(f64::MIN_POSITIVE);
-    0.5 * (part(px, sx) + part(py, sy))
+    let part = |p: &AtSamples| normals * frob(&p.pts) / frob(&p.nrm).max(f64::MIN_POSITIVE);
+    0.5 * (part(px) + part(py))
 }
 
 /// Weights of one level's energies.
@@ -313,24 +523,18 @@ pub(crate) struct FeatureMap {
     pub weights: Vec<f64>,
 }
 
-/// Rows `[p, fn · n, ff · F]` of the product embedding (`F` has a row
-/// per entry of `idx`).
-fn embed(
-    idx: &[usize],
-    pts: &[[f64; 3]],
-    nrm: &[[f64; 3]],
-    fn_: f64,
-    feat: Option<(&DMatrix<f64>, f64)>,
-) -> Mat<f64> {
+/// Rows `[p, fn · n, ff · F]` of the product embedding (a row per
+/// sample).
+fn embed(p: &AtSamples, fn_: f64, feat: Option<(&DMatrix<f64>, f64)>) -> Mat<f64> {
     let kf = feat.map_or(0, |(f, _)| f.ncols());
     // Normals at weight 0 are left out (their columns would be 0).
     let kn = if fn_ == 0.0 { 0 } else { 3 };
-    Mat::from_fn(idx.len(), 3 + kn + kf, |r, c| {
-        let i = idx[r];
+    let (pts, nrm) = (&p.pts, &p.nrm);
+    Mat::from_fn(pts.len(), 3 + kn + kf, |r, c| {
         if c < 3 {
-            pts[i][c]
+            pts[r][c]
         } else if c < 3 + kn {
-            fn_ * nrm[i][c - 3]
+            fn_ * nrm[r][c - 3]
         } else {
             let (f, s) = feat.expect("features");
             s * f[(r, c - 3 - kn)]
@@ -338,9 +542,9 @@ fn embed(
     })
 }
 
-fn frob(p: &[[f64; 3]], idx: &[usize]) -> f64 {
-    idx.iter()
-        .map(|&i| p[i][0].powi(2) + p[i][1].powi(2) + p[i][2].powi(2))
+fn frob(p: &[[f64; 3]]) -> f64 {
+    p.iter()
+        .map(|v| v[0].powi(2) + v[1].powi(2) + v[2].powi(2))
         .sum::<f64>()
         .sqrt()
 }
@@ -401,16 +605,16 @@ fn search_params(data: MatRef<'_, f64>) -> NnParams {
 /// sample a Y sample (left empty unless `both`) and for each Y sample an X
 /// sample (positions in the other shape's samples).
 pub(crate) fn correspondences(
-    px: &Posed,
-    py: &Posed,
+    px: &AtSamples,
+    py: &AtSamples,
     (sx, sy): (&Samples, &Samples),
     w: &LevelWeights,
     fmap: Option<&FeatureMap>,
     both: bool,
     report: &mut RefineReport,
 ) -> Result<(Vec<usize>, Vec<usize>)> {
-    let (vx, vy) = (frob(&px.pts, sx), frob(&py.pts, sy));
-    let fnm = normal_scale(px, py, sx, sy, w.normals);
+    let (vx, vy) = (frob(&px.pts), frob(&py.pts));
+    let fnm = normal_scale(px, py, w.normals);
     let feats = fmap.map(|fm| (features(sx, fm, Some(&fm.c)), features(sy, fm, None)));
     let (fx, fy) = match &feats {
         Some((fx, fy)) => {
@@ -422,8 +626,8 @@ pub(crate) fn correspondences(
         }
         None => (None, None),
     };
-    let ex = embed(sx, &px.pts, &px.nrm, fnm, fx);
-    let ey = embed(sy, &py.pts, &py.nrm, fnm, fy);
+    let ex = embed(px, fnm, fx);
+    let ey = embed(py, fnm, fy);
     let t = std::time::Instant::now();
     let search = |d: &Mat<f64>, q: &Mat<f64>| {
         nearest_rows(d.as_ref(), q.as_ref(), None, &search_params(d.as_ref()))
@@ -475,7 +679,7 @@ impl Shells {
         let weights = shell_weights(k);
         Shells {
             x: x.shell(&weights),
-            y: Posed::new(y.shell(&weights), y.faces),
+            y: Posed::new(y.shell(&weights), y.faces, y.orient),
             weights,
         }
     }
@@ -501,17 +705,26 @@ pub(crate) fn level(
     let (wk, xs, ys) = (&shells.weights, &shells.x, &shells.y);
     let kk = wk.len().min(x.phi.ncols()).min(y.phi.ncols());
     let kd = k.min(kk);
-    let pts = x.deform(xs, &state.tau, kd);
-    let cur = if w.normals > 0.0 {
-        Posed::new(pts, x.faces)
-    } else {
-        // Normals at weight 0 do not enter the correspondences.
-        Posed {
-            pts,
-            nrm: Vec::new(),
-        }
+    let arap = arap_gram.filter(|_| w.arap > 0.0);
+    // X deformed: on every vertex for ARAP, else at the samples only
+    // (normals at weight 0 do not enter the correspondences).
+    let cur = arap.map(|_| {
+        let pts = x.deform(xs, &state.tau, kd);
+        Posed::new(pts, x.faces, x.orient)
+    });
+    let px = match &cur {
+        Some(c) => c.at(sx),
+        None => sx.pose(x, xs, Some((&state.tau, kd)), w.normals > 0.0),
     };
-    let (ab, ba) = correspondences(&cur, ys, (sx, sy), w, state.fmap.as_ref(), true, report)?;
+    let (ab, ba) = correspondences(
+        &px,
+        &ys.at(sy),
+        (sx, sy),
+        w,
+        state.fmap.as_ref(),
+        true,
+        report,
+    )?;
 
     // Deformation: Σ ‖XS(s) + Φ(s)τ − YS(π s)‖² over both directions
     // (pairs of sample positions). Each X sample's pairs share its row of
@@ -543,7 +756,7 @@ pub(crate) fn level(
     let ca = weighted(&|r| count[r], kd);
     let mut m = mul_ref(view(&ca, kd), true, a);
     let mut z = mul_ref(a, true, view(&res, 3));
-    if let (Some(g), true) = (arap_gram, w.arap > 0.0) {
+    if let (Some(g), Some(cur)) = (arap, &cur) {
         let ga = g.view((0, 0), (kd, kd));
         let rot = rotations(xs, &cur.pts, &x.neighbours);
         let mut b = vec![Vector3::zeros(); xs.len()];
@@ -646,8 +859,8 @@ pub(crate) fn alignment_energy(
     report: &mut RefineReport,
 ) -> Result<f64> {
     let k = state.fmap.as_ref().map_or(state.tau.nrows(), |f| f.k);
-    let cur = Posed::new(x.deform(&x.verts, &state.tau, k), x.faces);
-    let full_y = Posed::new(y.verts.clone(), y.faces);
+    let cur = sx.pose(x, &x.verts, Some((&state.tau, k)), true);
+    let full_y = sy.pose(y, &y.verts, None, true);
     let (ab, ba) = correspondences(
         &cur,
         &full_y,
@@ -657,7 +870,7 @@ pub(crate) fn alignment_energy(
         true,
         report,
     )?;
-    let fn_ = normal_scale(&cur, &full_y, sx, sy, w.normals);
+    let fn_ = normal_scale(&cur, &full_y, w.normals);
     let (cur, nx, yv, ny) = (&cur.pts, &cur.nrm, &full_y.pts, &full_y.nrm);
     let dist = |i: usize, j: usize| {
         let mut s = 0.0;
@@ -666,12 +879,13 @@ pub(crate) fn alignment_energy(
         }
         s.sqrt()
     };
+    // (Positions in the samples.)
     let mut e = 0.0;
-    for (&i, &j) in sx.iter().zip(&ab) {
-        e += x.mass[i] * dist(i, sy[j]);
+    for (&i, (si, &j)) in sx.iter().zip(ab.iter().enumerate()) {
+        e += x.mass[i] * dist(si, j);
     }
-    for (&i, &j) in ba.iter().zip(sy.iter()) {
-        e += y.mass[j] * dist(sx[i], j);
+    for (&i, (sj, &j)) in ba.iter().zip(sy.iter().enumerate()) {
+        e += y.mass[j] * dist(i, sj);
     }
     Ok(e / (sx.len() + sy.len()) as f64)
 }
@@ -692,6 +906,48 @@ mod tests {
         assert_eq!(w.len(), 7);
         assert!((w[3] - 0.5).abs() < 1e-12 && (w[6] - 0.01).abs() < 1e-9);
         assert_eq!(shell_weights(1), vec![1.0]);
+    }
+
+    /// The points and normals at the samples from their one-ring are the
+    /// numbers of every vertex's (the same GEMM rows, the same sums in
+    /// face order), and the normals point outwards on a sphere; a
+    /// reflected shell's orientation flips.
+    #[test]
+    fn the_samples_ring_poses_as_every_vertex_does() {
+        let mesh = fmaps_mesh_io::generate::icosphere(1.0, 5);
+        let (verts, faces) = (mesh.vertices(), mesh.faces());
+        let n = verts.len();
+        // Any smooth functions as the "basis", a uniform mass.
+        let phi = DMatrix::from_fn(n, 40, |i, c| {
+            let p = verts[i];
+            ((c + 1) as f64 * p[0] + 0.3 * c as f64 * p[1] - p[2]).sin()
+        });
+        let mass = vec![1.0 / n as f64; n];
+        let evals: Vec<f64> = (0..40).map(|c| c as f64).collect();
+        let mut x = Shell::new(verts, faces, &phi, &mass, &evals);
+        assert_eq!(x.orient, 1.0, "an icosphere is outward-oriented");
+        let samples = Samples::new(&x, (0..n).step_by(40).collect());
+        assert!(samples.ring.is_some(), "256 samples of 10242 vertices");
+        let tau = DMatrix::from_fn(49, 3, |r, d| 0.01 * ((r * 3 + d) as f64).cos());
+        for k in [6, 40] {
+            let ring = samples.pose(&x, &x.verts, Some((&tau, k)), true);
+            let full = Posed::new(x.deform(&x.verts, &tau, k), x.faces, x.orient);
+            let full = full.at(&samples);
+            assert_eq!(ring.pts, full.pts, "k = {k}");
+            assert_eq!(ring.nrm, full.nrm, "k = {k}");
+        }
+        // (The shell is centred and scaled to unit area: the radial
+        // direction is the point over its length.)
+        let outward = |a: &AtSamples| {
+            a.pts.iter().zip(a.nrm.iter()).all(|(p, m)| {
+                let r = (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt();
+                (p[0] * m[0] + p[1] * m[1] + p[2] * m[2]) / r > 0.99
+            })
+        };
+        assert!(outward(&samples.pose(&x, &x.verts, None, true)));
+        x.rotate(&Matrix3::from_diagonal(&Vector3::new(-1.0, 1.0, 1.0)));
+        assert_eq!(x.orient, -1.0, "a mirror image turns its faces inwards");
+        assert!(outward(&samples.pose(&x, &x.verts, None, true)));
     }
 
     /// The final point map's search on many rows (the ball search where
