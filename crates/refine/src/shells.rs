@@ -559,8 +559,8 @@ impl SmoothShells {
         let shell = x.shell(&wk);
         let cur = level::Posed::new(x.deform(&shell, &state.tau, fm.k), x.faces, x.orient);
         let ys = level::Posed::new(y.shell(&wk), y.faces, y.orient);
-        let all_x = Samples::all(x);
-        let all_y = Samples::all(y);
+        let all_x = Samples::all(x, true);
+        let all_y = Samples::all(y, false);
         let (_, t_ba) = level::correspondences(
             &cur.at(&all_x),
             &ys.at(&all_y),

@@ -370,6 +370,9 @@ pub(crate) struct Samples<'a> {
     pub sqrt_mass: Vec<f64>,
     /// Their one-ring, where it is small ([`Samples::pose`]).
     ring: Option<Ring>,
+    /// Clusters of the rows for the ball search among them
+    /// ([`search_params`]), when they are every vertex of a large shape.
+    cells: Option<Vec<u32>>,
 }
 
 impl<'a> Samples<'a> {
@@ -381,17 +384,31 @@ impl<'a> Samples<'a> {
             })),
             sqrt_mass: idx.iter().map(|&i| s.mass[i].sqrt()).collect(),
             ring: Ring::new(s, &idx),
+            cells: None,
             idx,
         }
     }
 
-    /// Every vertex of `s`, in order (Φ borrowed).
-    pub fn all(s: &Shell<'a>) -> Samples<'a> {
+    /// Every vertex of `s`, in order (Φ borrowed); with `cells`, from
+    /// [`BALLS_FROM_ROWS`] vertices, clusters for searching among their
+    /// rows: the cells of [`crate::search_cells`] farthest points (each
+    /// vertex's nearest), patches of the surface, on which the rows'
+    /// positions, normals and spectral features are smooth. (A k-means
+    /// of the rows themselves took longer than the search it saved: 80k
+    /// vertices.)
+    pub fn all(s: &Shell<'a>, cells: bool) -> Samples<'a> {
+        let n = s.verts.len();
+        let cells = (cells && n >= BALLS_FROM_ROWS).then(|| {
+            let (_, nearest) =
+                crate::farthest_point_sampling_with_nearest(&s.verts, crate::search_cells(n), 0);
+            nearest.into_iter().map(|c| c as u32).collect()
+        });
         Samples {
             phi: std::borrow::Cow::Borrowed(s.phi),
             sqrt_mass: s.mass.iter().map(|m| m.sqrt()).collect(),
-            idx: (0..s.verts.len()).collect(),
+            idx: (0..n).collect(),
             ring: None,
+            cells,
         }
     }
 
@@ -594,8 +611,12 @@ const BALLS_FROM_ROWS: usize = 4096;
 /// spectral features are smooth on the surface, so the clusters are
 /// compact (FAUST pair subdivided twice, 80k vertices, 197 columns: brute
 /// force compared all 6.4·10⁹ pairs per finalist).
-fn search_params(data: MatRef<'_, f64>) -> NnParams {
-    match fmaps_nn::Partition::for_one_search(data, BALLS_FROM_ROWS) {
+fn search_params(data: MatRef<'_, f64>, cells: Option<&[u32]>) -> NnParams {
+    let partition = match cells {
+        Some(c) => fmaps_nn::Partition::for_balls_from_labels(data, BALLS_FROM_ROWS, c.to_vec()),
+        None => fmaps_nn::Partition::for_one_search(data, BALLS_FROM_ROWS),
+    };
+    match partition {
         Some(p) => NnParams::with_strategy(fmaps_nn::NnStrategy::Balls).with_partition(p),
         None => NnParams::with_strategy(fmaps_nn::NnStrategy::Brute),
     }
@@ -629,16 +650,24 @@ pub(crate) fn correspondences(
     let ex = embed(px, fnm, fx);
     let ey = embed(py, fnm, fy);
     let t = std::time::Instant::now();
-    let search = |d: &Mat<f64>, q: &Mat<f64>| {
-        nearest_rows(d.as_ref(), q.as_ref(), None, &search_params(d.as_ref()))
-            .map_err(fmaps_solve::Error::Search)
+    let search = |d: &Mat<f64>, q: &Mat<f64>, cells: Option<&[u32]>| {
+        nearest_rows(
+            d.as_ref(),
+            q.as_ref(),
+            None,
+            &search_params(d.as_ref(), cells),
+        )
+        .map_err(fmaps_solve::Error::Search)
     };
     let (ab, ba) = if both {
         report.nn_searches += 2;
-        rayon::join(|| search(&ey, &ex), || search(&ex, &ey))
+        rayon::join(
+            || search(&ey, &ex, sy.cells.as_deref()),
+            || search(&ex, &ey, sx.cells.as_deref()),
+        )
     } else {
         report.nn_searches += 1;
-        (Ok(Vec::new()), search(&ex, &ey))
+        (Ok(Vec::new()), search(&ex, &ey, sx.cells.as_deref()))
     };
     report.nn_seconds += t.elapsed().as_secs_f64();
     Ok((ab?, ba?))
@@ -1098,14 +1127,6 @@ mod tests {
             })
         };
         let (data, queries) = (embed(0.0), embed(0.013));
-        let params = search_params(data.as_ref());
-        if params.strategy != fmaps_nn::NnStrategy::Balls {
-            eprintln!(
-                "skipped: the ball search is not chosen on this CPU (matrix tiles) or with \
-                 FMAPS_NO_BALLS; brute force alone was compared with itself"
-            );
-        }
-        let got = nearest_rows(data.as_ref(), queries.as_ref(), None, &params).unwrap();
         let want = nearest_rows(
             data.as_ref(),
             queries.as_ref(),
@@ -1113,6 +1134,24 @@ mod tests {
             &NnParams::with_strategy(fmaps_nn::NnStrategy::Brute),
         )
         .unwrap();
-        assert_eq!(got, want);
+        // k-means clusters of the rows, and cells of farthest points on
+        // the surface (as `Samples::all` makes them).
+        let points: Vec<[f64; 3]> = (0..n)
+            .map(|i| [data[(i, 0)], data[(i, 1)], data[(i, 2)]])
+            .collect();
+        let (_, nearest) =
+            crate::farthest_point_sampling_with_nearest(&points, crate::search_cells(n), 0);
+        let cells: Vec<u32> = nearest.into_iter().map(|c| c as u32).collect();
+        for cells in [None, Some(cells.as_slice())] {
+            let params = search_params(data.as_ref(), cells);
+            if params.strategy != fmaps_nn::NnStrategy::Balls {
+                eprintln!(
+                    "skipped: the ball search is not chosen on this CPU (matrix tiles) or with \
+                     FMAPS_NO_BALLS; brute force alone was compared with itself"
+                );
+            }
+            let got = nearest_rows(data.as_ref(), queries.as_ref(), None, &params).unwrap();
+            assert_eq!(got, want, "cells: {}", cells.is_some());
+        }
     }
 }
