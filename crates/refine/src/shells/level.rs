@@ -460,11 +460,32 @@ impl<'a> Samples<'a> {
             }
             None => ring.verts.iter().map(|&v| base[v]).collect(),
         };
+        ring.at_samples(&p, normals, s.orient)
+    }
+
+    /// [`Samples::pose`] of the points `pts` of every vertex of `s`.
+    pub fn at_points(&self, s: &Shell<'_>, pts: &[[f64; 3]], normals: bool) -> AtSamples<'static> {
+        match &self.ring {
+            Some(ring) => {
+                let p: Vec<[f64; 3]> = ring.verts.iter().map(|&v| pts[v]).collect();
+                ring.at_samples(&p, normals, s.orient)
+            }
+            None => self.pose(s, pts, None, normals),
+        }
+    }
+}
+
+impl Ring {
+    /// The points and normals (when `normals`, oriented by `sign`) at the
+    /// samples, of the points `p` of the ring's vertices.
+    fn at_samples(&self, p: &[[f64; 3]], normals: bool, sign: f64) -> AtSamples<'static> {
+        use std::borrow::Cow;
+        let ring = self;
         let pts = ring.at.iter().map(|&r| p[r as usize]).collect();
         let nrm = if normals {
             // Each sample's faces' cross products summed in face order, as
             // [`normals`] sums them.
-            (0..self.len())
+            (0..ring.at.len())
                 .map(|i| {
                     let mut n = [0.0f64; 3];
                     for f in &ring.faces[ring.face_start[i]..ring.face_start[i + 1]] {
@@ -474,7 +495,7 @@ impl<'a> Samples<'a> {
                             n[d] += fnrm[d];
                         }
                     }
-                    unit(n, s.orient)
+                    unit(n, sign)
                 })
                 .collect()
         } else {
@@ -812,14 +833,12 @@ pub(crate) fn level(
     let kk = wk.len().min(x.phi.ncols()).min(y.phi.ncols());
     let kd = k.min(kk);
     let arap = arap_gram.filter(|_| w.arap > 0.0);
-    // X deformed: on every vertex for ARAP, else at the samples only
-    // (normals at weight 0 do not enter the correspondences).
-    let cur = arap.map(|_| {
-        let pts = x.deform(xs, &state.tau, kd);
-        Posed::new(pts, x.faces, x.orient)
-    });
+    // X deformed: on every vertex for ARAP, else at the samples only;
+    // normals at the samples (at weight 0 they do not enter the
+    // correspondences).
+    let cur = arap.map(|_| x.deform(xs, &state.tau, kd));
     let px = match &cur {
-        Some(c) => c.at(sx),
+        Some(pts) => sx.at_points(x, pts, w.normals > 0.0),
         None => sx.pose(x, xs, Some((&state.tau, kd)), w.normals > 0.0),
     };
     let (ab, ba) = correspondences(
@@ -864,7 +883,7 @@ pub(crate) fn level(
     let mut z = mul_ref(a, true, view(&res, 3));
     if let (Some(g), Some(cur)) = (arap, &cur) {
         let ga = g.view((0, 0), (kd, kd));
-        let rot = rotations(xs, &cur.pts, &x.neighbours);
+        let rot = rotations(xs, cur, &x.neighbours);
         let mut b = vec![Vector3::zeros(); xs.len()];
         for (i, nb) in x.neighbours.iter().enumerate() {
             for &j in nb {
