@@ -356,6 +356,36 @@ impl Ring {
             faces,
         })
     }
+
+    /// The points and normals (when `normals`, oriented by `sign`) at the
+    /// samples, of the points `p` of the ring's vertices.
+    fn at_samples(&self, p: &[[f64; 3]], normals: bool, sign: f64) -> AtSamples<'static> {
+        use std::borrow::Cow;
+        let pts = self.at.iter().map(|&r| p[r as usize]).collect();
+        let nrm = if normals {
+            // Each sample's faces' cross products summed in face order, as
+            // [`normals`] sums them.
+            (0..self.at.len())
+                .map(|i| {
+                    let mut n = [0.0f64; 3];
+                    for f in &self.faces[self.face_start[i]..self.face_start[i + 1]] {
+                        let (a, b, c) = (p[f[0] as usize], p[f[1] as usize], p[f[2] as usize]);
+                        let fnrm = cross(sub(b, a), sub(c, a));
+                        for d in 0..3 {
+                            n[d] += fnrm[d];
+                        }
+                    }
+                    unit(n, sign)
+                })
+                .collect()
+        } else {
+            Vec::new()
+        };
+        AtSamples {
+            pts: Cow::Owned(pts),
+            nrm: Cow::Owned(nrm),
+        }
+    }
 }
 
 /// Sample vertices of a shape (`Deref` to their indices) with their rows
@@ -471,39 +501,6 @@ impl<'a> Samples<'a> {
                 ring.at_samples(&p, normals, s.orient)
             }
             None => self.pose(s, pts, None, normals),
-        }
-    }
-}
-
-impl Ring {
-    /// The points and normals (when `normals`, oriented by `sign`) at the
-    /// samples, of the points `p` of the ring's vertices.
-    fn at_samples(&self, p: &[[f64; 3]], normals: bool, sign: f64) -> AtSamples<'static> {
-        use std::borrow::Cow;
-        let ring = self;
-        let pts = ring.at.iter().map(|&r| p[r as usize]).collect();
-        let nrm = if normals {
-            // Each sample's faces' cross products summed in face order, as
-            // [`normals`] sums them.
-            (0..ring.at.len())
-                .map(|i| {
-                    let mut n = [0.0f64; 3];
-                    for f in &ring.faces[ring.face_start[i]..ring.face_start[i + 1]] {
-                        let (a, b, c) = (p[f[0] as usize], p[f[1] as usize], p[f[2] as usize]);
-                        let fnrm = cross(sub(b, a), sub(c, a));
-                        for d in 0..3 {
-                            n[d] += fnrm[d];
-                        }
-                    }
-                    unit(n, sign)
-                })
-                .collect()
-        } else {
-            Vec::new()
-        };
-        AtSamples {
-            pts: Cow::Owned(pts),
-            nrm: Cow::Owned(nrm),
         }
     }
 }
