@@ -60,7 +60,9 @@
 //! lowest final energy wins); 60 random proposals for each of two
 //! orientations instead of 100 for one (README).
 
+mod arap;
 mod level;
+mod posed;
 mod rigid;
 mod screen;
 
