@@ -318,30 +318,9 @@ impl SpectralBasis {
     }
 }
 
-/// Runs `f` at every SIMD level this CPU has, the process-wide cap
-/// (`fmaps_simd::set_simd_cap`) set to it, then lifts the cap and prints
-/// the levels skipped. Under one lock: tests run on parallel threads, and
-/// one that compares results at a fixed level must not see another test
-/// change the level.
+/// [`fmaps_simd::at_every_level`]: `f` at every SIMD level this CPU has,
+/// under the process-wide lock, the skipped levels printed.
 #[cfg(test)]
-pub(crate) fn at_every_simd_level(mut f: impl FnMut(fmaps_simd::SimdLevel)) {
-    use fmaps_simd::{SimdLevel, set_simd_cap, simd_level};
-    static LOCK: std::sync::Mutex<()> = std::sync::Mutex::new(());
-    let _cap = LOCK
-        .lock()
-        .unwrap_or_else(std::sync::PoisonError::into_inner);
-    for level in SimdLevel::ALL.into_iter().filter(|l| l.detected()) {
-        set_simd_cap(Some(level));
-        assert_eq!(simd_level(), level);
-        f(level);
-    }
-    set_simd_cap(None);
-    let skipped: Vec<&str> = SimdLevel::ALL
-        .into_iter()
-        .filter(|l| !l.detected())
-        .map(|l| l.name())
-        .collect();
-    if !skipped.is_empty() {
-        eprintln!("skipped (this CPU lacks them): {skipped:?}");
-    }
+pub(crate) fn at_every_simd_level(f: impl FnMut(fmaps_simd::SimdLevel)) {
+    fmaps_simd::at_every_level(f);
 }

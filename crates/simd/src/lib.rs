@@ -122,6 +122,39 @@ fn cap() -> u8 {
     CAP.load(Ordering::Relaxed)
 }
 
+/// Runs `f` at every level this CPU has (narrowest first), the
+/// process-wide cap ([`set_simd_cap`]) set to it, then lifts the cap and
+/// prints the levels the CPU lacks (a test that runs through here says
+/// what it skipped). Under one lock for the process: tests run on
+/// parallel threads, and one that compares results at a fixed level must
+/// not see another change the level. Meant for tests.
+///
+/// ```
+/// let mut seen = Vec::new();
+/// fmaps_simd::at_every_level(|level| seen.push(level));
+/// assert_eq!(seen[0], fmaps_simd::SimdLevel::Baseline);
+/// ```
+pub fn at_every_level(mut f: impl FnMut(SimdLevel)) {
+    static LOCK: std::sync::Mutex<()> = std::sync::Mutex::new(());
+    let _cap = LOCK
+        .lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner);
+    for level in SimdLevel::ALL.into_iter().filter(|l| l.detected()) {
+        set_simd_cap(Some(level));
+        assert_eq!(simd_level(), level);
+        f(level);
+    }
+    set_simd_cap(None);
+    let skipped: Vec<&str> = SimdLevel::ALL
+        .into_iter()
+        .filter(|l| !l.detected())
+        .map(|l| l.name())
+        .collect();
+    if !skipped.is_empty() {
+        eprintln!("skipped (this CPU lacks them): {skipped:?}");
+    }
+}
+
 /// Caps the instruction set of every dispatched kernel at `level` for the
 /// whole process (`None`: no cap), e.g. to test or time the AVX2 or the
 /// baseline kernels on an AVX-512 CPU; overrides `FMAPS_SIMD`. Kernels

@@ -156,29 +156,18 @@ impl fmaps_simd::Kernel for JacobiLanes<'_> {
                         c[l] = cl;
                         sn[l] = sl;
                     }
-                    for k in 0..3 {
-                        for l in 0..LANES {
-                            let (akp, akq) = (a[k][p][l], a[k][q][l]);
-                            let (np, nq) = (c[l] * akp - sn[l] * akq, sn[l] * akp + c[l] * akq);
-                            a[k][p][l] = if on[l] { np } else { akp };
-                            a[k][q][l] = if on[l] { nq } else { akq };
-                        }
+                    // Columns p and q, then rows p and q, then V's columns.
+                    for row in &mut a {
+                        let [x, y] = row.get_disjoint_mut([p, q]).expect("p < q");
+                        rotate(x, y, (&c, &sn), &on);
                     }
-                    for k in 0..3 {
-                        for l in 0..LANES {
-                            let (apk, aqk) = (a[p][k][l], a[q][k][l]);
-                            let (np, nq) = (c[l] * apk - sn[l] * aqk, sn[l] * apk + c[l] * aqk);
-                            a[p][k][l] = if on[l] { np } else { apk };
-                            a[q][k][l] = if on[l] { nq } else { aqk };
-                        }
+                    let [ap, aq] = a.get_disjoint_mut([p, q]).expect("p < q");
+                    for (x, y) in ap.iter_mut().zip(aq.iter_mut()) {
+                        rotate(x, y, (&c, &sn), &on);
                     }
                     for row in &mut v {
-                        for l in 0..LANES {
-                            let (vp, vq) = (row[p][l], row[q][l]);
-                            let (np, nq) = (c[l] * vp - sn[l] * vq, sn[l] * vp + c[l] * vq);
-                            row[p][l] = if on[l] { np } else { vp };
-                            row[q][l] = if on[l] { nq } else { vq };
-                        }
+                        let [x, y] = row.get_disjoint_mut([p, q]).expect("p < q");
+                        rotate(x, y, (&c, &sn), &on);
                     }
                 }
             }
@@ -201,6 +190,24 @@ fn procrustes(s: &Matrix3<f64>) -> Matrix3<f64> {
     match jacobi(&gram(s)) {
         Some((d, v)) => kabsch(s, &d, &v),
         None => Matrix3::identity(),
+    }
+}
+
+/// `(x, y) ← (c x − s y, s x + c y)` in the lanes that are `on` (the
+/// others keep their values exactly), as [`JacobiLanes`] applies a
+/// rotation (the one-matrix sweeps' products, lane by lane).
+#[inline(always)]
+fn rotate(
+    x: &mut [f64; LANES],
+    y: &mut [f64; LANES],
+    (c, sn): (&[f64; LANES], &[f64; LANES]),
+    on: &[bool; LANES],
+) {
+    for l in 0..LANES {
+        let (xl, yl) = (x[l], y[l]);
+        let (nx, ny) = (c[l] * xl - sn[l] * yl, sn[l] * xl + c[l] * yl);
+        x[l] = if on[l] { nx } else { xl };
+        y[l] = if on[l] { ny } else { yl };
     }
 }
 
@@ -250,6 +257,16 @@ fn kabsch(s: &Matrix3<f64>, d: &[f64; 3], v: &[[f64; 3]; 3]) -> Matrix3<f64> {
 mod tests {
     use super::*;
 
+    /// Uniform numbers in [-1, 1) from a seed (a 64-bit LCG).
+    fn uniform(mut seed: u64) -> impl FnMut() -> f64 {
+        move || {
+            seed = seed
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            ((seed >> 11) as f64 / (1u64 << 53) as f64) * 2.0 - 1.0
+        }
+    }
+
     /// [`procrustes`] is the SVD's answer (nalgebra's, with the
     /// determinant fixed as Kabsch does) to 1e-10, a rotation to 1e-13:
     /// random matrices, nearly planar one-rings (rank ~2), rank 1 and 0.
@@ -266,13 +283,7 @@ mod tests {
             }
             r
         };
-        let mut seed = 12345u64;
-        let mut rnd = || {
-            seed = seed
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            ((seed >> 11) as f64 / (1u64 << 53) as f64) * 2.0 - 1.0
-        };
+        let mut rnd = uniform(12345);
         for case in 0..2000 {
             let mut s = Matrix3::from_fn(|_, _| rnd());
             if case % 2 == 1 {
@@ -305,13 +316,7 @@ mod tests {
     /// partial last chunk.
     #[test]
     fn jacobi_lanes_are_the_scalar_sweeps() {
-        let mut seed = 99u64;
-        let mut rnd = || {
-            seed = seed
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            ((seed >> 11) as f64 / (1u64 << 53) as f64) * 2.0 - 1.0
-        };
+        let mut rnd = uniform(99);
         let mut b: Vec<[[f64; 3]; 3]> = (0..203)
             .map(|i| {
                 let s = Matrix3::from_fn(|_, _| rnd());
@@ -327,13 +332,8 @@ mod tests {
         b[5] = [[0.0; 3]; 3];
         b[17][1][1] = f64::NAN;
         let want: Vec<_> = b.iter().map(jacobi).collect();
-        for level in fmaps_simd::SimdLevel::ALL
-            .into_iter()
-            .filter(|l| l.detected())
-        {
-            fmaps_simd::set_simd_cap(Some(level));
+        fmaps_simd::at_every_level(|level| {
             let got = fmaps_simd::dispatch(JacobiLanes(&b));
-            fmaps_simd::set_simd_cap(None);
             assert_eq!(got.len(), want.len());
             for (i, (g, w)) in got.iter().zip(&want).enumerate() {
                 let bits = |x: &Option<([f64; 3], [[f64; 3]; 3])>| {
@@ -341,14 +341,6 @@ mod tests {
                 };
                 assert_eq!(bits(g), bits(w), "matrix {i} at {level:?}");
             }
-        }
-        let skipped: Vec<_> = fmaps_simd::SimdLevel::ALL
-            .into_iter()
-            .filter(|l| !l.detected())
-            .map(|l| l.name())
-            .collect();
-        if !skipped.is_empty() {
-            eprintln!("skipped (this CPU lacks them): {skipped:?}");
-        }
+        });
     }
 }

@@ -9,11 +9,11 @@ use nalgebra::DMatrix;
 
 use super::level::{BALLS_FROM_ROWS, Shell, mul_ref, view};
 
-pub(super) fn sub(p: [f64; 3], q: [f64; 3]) -> [f64; 3] {
+fn sub(p: [f64; 3], q: [f64; 3]) -> [f64; 3] {
     [p[0] - q[0], p[1] - q[1], p[2] - q[2]]
 }
 
-pub(super) fn cross(p: [f64; 3], q: [f64; 3]) -> [f64; 3] {
+fn cross(p: [f64; 3], q: [f64; 3]) -> [f64; 3] {
     [
         p[1] * q[2] - p[2] * q[1],
         p[2] * q[0] - p[0] * q[2],
