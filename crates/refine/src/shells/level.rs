@@ -335,19 +335,22 @@ pub(crate) fn correspondences(
 ) -> Result<(Vec<usize>, Vec<usize>)> {
     let (vx, vy) = (frob(&px.pts), frob(&py.pts));
     let fnm = normal_scale(px, py, w.normals);
-    let feats = fmap.map(|fm| (features(sx, fm, Some(&fm.c)), features(sy, fm, None)));
-    let (fx, fy) = match &feats {
-        Some((fx, fy)) => {
-            let (nfx, nfy) = (fx.norm(), fy.norm());
-            let s = 0.5
-                * (w.features * vx / nfx.max(f64::MIN_POSITIVE)
-                    + w.features * vy / nfy.max(f64::MIN_POSITIVE));
-            (Some((fx, s)), Some((fy, s)))
-        }
-        None => (None, None),
+    // The features are dropped once embedded (on every vertex of an 80k
+    // mesh they are n x k each, alive through the search otherwise).
+    let (ex, ey) = {
+        let feats = fmap.map(|fm| (features(sx, fm, Some(&fm.c)), features(sy, fm, None)));
+        let (fx, fy) = match &feats {
+            Some((fx, fy)) => {
+                let (nfx, nfy) = (fx.norm(), fy.norm());
+                let s = 0.5
+                    * (w.features * vx / nfx.max(f64::MIN_POSITIVE)
+                        + w.features * vy / nfy.max(f64::MIN_POSITIVE));
+                (Some((fx, s)), Some((fy, s)))
+            }
+            None => (None, None),
+        };
+        (embed(px, fnm, fx), embed(py, fnm, fy))
     };
-    let ex = embed(px, fnm, fx);
-    let ey = embed(py, fnm, fy);
     let t = std::time::Instant::now();
     let search = |d: &Mat<f64>, q: &Mat<f64>, cells: Option<&[u32]>| {
         nearest_rows(
