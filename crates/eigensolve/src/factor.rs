@@ -344,7 +344,7 @@ mod tests {
         let st = Structure::of(&f.symbolic).expect("a simplicial factor");
         let n = problem.n();
         let mut rng = SplitMix(7);
-        crate::at_every_simd_level(|level| {
+        fmaps_simd::at_every_level(|level| {
             for ncols in 1..=LANES {
                 let b: Vec<f64> = (0..n * ncols).map(|_| rng.next_f64() - 0.5).collect();
                 let mut ours = b.clone();

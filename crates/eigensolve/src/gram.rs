@@ -368,7 +368,7 @@ mod tests {
             (40, 401, 3),
             (700, 64, 8),
         ];
-        crate::at_every_simd_level(|level| {
+        fmaps_simd::at_every_level(|level| {
             for &(n, cols, b) in &shapes {
                 let v = random(n * cols, 1 + n as u64);
                 let w = random(n * b, 2 + cols as u64);

@@ -317,10 +317,3 @@ impl SpectralBasis {
         }
     }
 }
-
-/// [`fmaps_simd::at_every_level`]: `f` at every SIMD level this CPU has,
-/// under the process-wide lock, the skipped levels printed.
-#[cfg(test)]
-pub(crate) fn at_every_simd_level(f: impl FnMut(fmaps_simd::SimdLevel)) {
-    fmaps_simd::at_every_level(f);
-}
