@@ -253,12 +253,14 @@ fn surrogate(
     state: &mut Alignment,
     report: &mut RefineReport,
 ) -> Result<f64> {
+    let mut prev = None;
     for (k, sh) in shells {
         let w = LevelWeights {
             normals: if *k > 10 { align.normals } else { 0.0 },
             ..align
         };
-        level::level(x, y, sh, sx, sy, *k, &w, None, state, report)?;
+        let found = level::level(x, y, sh, sx, sy, *k, &w, None, state, prev.as_ref(), report)?;
+        prev = Some(found);
     }
     level::alignment_energy(x, y, sx, sy, state, &score, report)
 }
@@ -570,6 +572,7 @@ impl SmoothShells {
             &LevelWeights::MAIN,
             Some(fm),
             false,
+            None,
             report,
         )?;
         Ok(t_ba)
@@ -588,20 +591,31 @@ impl SmoothShells {
         mut state: Alignment,
         report: &mut RefineReport,
     ) -> Result<(f64, Alignment)> {
-        let mut prev: Option<Vec<usize>> = None;
+        let mut prev: Option<(Vec<usize>, Vec<usize>)> = None;
         let mut w = LevelWeights::MAIN;
         for k in schedule(self.k_max, self.levels) {
             let t = Instant::now();
             w.arap = 0.02 * (k.saturating_sub(20) as f64).sqrt();
             let shells = level::Shells::new(x, y, k);
-            let (_, ba) =
-                level::level(x, y, &shells, sx, sy, k, &w, Some(gram), &mut state, report)?;
+            let found = level::level(
+                x,
+                y,
+                &shells,
+                sx,
+                sy,
+                k,
+                &w,
+                Some(gram),
+                &mut state,
+                prev.as_ref(),
+                report,
+            )?;
             report.iterations.push(Iteration {
                 k: (k, k),
-                changed: crate::count_changed(prev.as_deref(), &ba),
+                changed: crate::count_changed(prev.as_ref().map(|p| p.1.as_slice()), &found.1),
                 seconds: t.elapsed().as_secs_f64(),
             });
-            prev = Some(ba);
+            prev = Some(found);
         }
         let score = LevelWeights {
             features: 0.11,

@@ -300,30 +300,54 @@ pub(crate) struct Alignment {
 /// at 20k and 80k, the same maps).
 pub(super) const BALLS_FROM_ROWS: usize = 4096;
 
-/// The search among the rows `data` of a product embedding. On the
-/// samples (a few thousand rows, 6 to 200+ columns) brute force: it
-/// measured twice as fast as the tree the automatic choice takes. From
-/// [`BALLS_FROM_ROWS`] rows (the final point map on every vertex),
-/// without matrix tiles, the ball search (exact: the same answers) over
-/// k-means clusters sized for one search without guesses
-/// ([`fmaps_nn::Partition::for_one_search`]): positions, normals and
-/// spectral features are smooth on the surface, so the clusters are
-/// compact (FAUST pair subdivided twice, 80k vertices, 197 columns: brute
-/// force compared all 6.4·10⁹ pairs per finalist).
-fn search_params(data: MatRef<'_, f64>, cells: Option<&[u32]>) -> NnParams {
+/// Columns of a product embedding from which [`search_params`] takes the
+/// ball search with guesses: below, brute force's fused kernel (up to 32
+/// columns) was faster even with guesses (the 5k default's
+/// initialisation, shells 6..20 on 1000 samples; docs/tuning.md).
+pub(super) const HINTED_BALLS_FROM_COLS: usize = 33;
+
+/// The search among the rows `data` of a product embedding (clusters of
+/// its rows: `cells`), `hinted` when each query comes with a guess (the
+/// previous level's correspondence). Without matrix tiles the ball search
+/// (exact: the same answers as brute force), where it pays:
+/// - with guesses from [`HINTED_BALLS_FROM_COLS`] columns, over `cells`
+///   (the alignment levels above shell ~26 on 2000 samples: the previous
+///   level's correspondences bound each query's search to a few clusters;
+///   docs/tuning.md has the measurement, the same maps);
+/// - without guesses from [`BALLS_FROM_ROWS`] rows (the final point map
+///   on every vertex), over `cells` or k-means clusters sized for one
+///   search ([`fmaps_nn::Partition::for_one_search`]): positions, normals
+///   and spectral features are smooth on the surface, so the clusters are
+///   compact (FAUST pair subdivided twice, 80k vertices, 197 columns:
+///   brute force compared all 6.4·10⁹ pairs per finalist).
+///
+/// Elsewhere brute force: on a few thousand rows without guesses it
+/// measured twice as fast as the tree the automatic choice takes.
+fn search_params(data: MatRef<'_, f64>, cells: Option<&[u32]>, hinted: bool) -> NnParams {
+    let balls = |p| NnParams::with_strategy(fmaps_nn::NnStrategy::Balls).with_partition(p);
+    if hinted
+        && data.ncols() >= HINTED_BALLS_FROM_COLS
+        && let Some(p) =
+            cells.and_then(|c| fmaps_nn::Partition::for_balls_from_labels(data, 1, c.to_vec()))
+    {
+        return balls(p);
+    }
     let partition = match cells {
         Some(c) => fmaps_nn::Partition::for_balls_from_labels(data, BALLS_FROM_ROWS, c.to_vec()),
         None => fmaps_nn::Partition::for_one_search(data, BALLS_FROM_ROWS),
     };
     match partition {
-        Some(p) => NnParams::with_strategy(fmaps_nn::NnStrategy::Balls).with_partition(p),
+        Some(p) => balls(p),
         None => NnParams::with_strategy(fmaps_nn::NnStrategy::Brute),
     }
 }
 
 /// Correspondences of the samples in the product embedding: for each X
 /// sample a Y sample (left empty unless `both`) and for each Y sample an X
-/// sample (positions in the other shape's samples).
+/// sample (positions in the other shape's samples). `hints`: guesses of
+/// both (the previous level's), which speed the search up only (exact:
+/// the same answers without them).
+#[allow(clippy::too_many_arguments)]
 pub(crate) fn correspondences(
     px: &AtSamples,
     py: &AtSamples,
@@ -331,6 +355,7 @@ pub(crate) fn correspondences(
     w: &LevelWeights,
     fmap: Option<&FeatureMap>,
     both: bool,
+    hints: Option<&(Vec<usize>, Vec<usize>)>,
     report: &mut RefineReport,
 ) -> Result<(Vec<usize>, Vec<usize>)> {
     let (vx, vy) = (frob(&px.pts), frob(&py.pts));
@@ -352,24 +377,26 @@ pub(crate) fn correspondences(
         (embed(px, fnm, fx), embed(py, fnm, fy))
     };
     let t = std::time::Instant::now();
-    let search = |d: &Mat<f64>, q: &Mat<f64>, cells: Option<&[u32]>| {
+    let search = |d: &Mat<f64>, q: &Mat<f64>, cells: Option<&[u32]>, hint: Option<&[usize]>| {
+        let hint = hint.filter(|h| h.len() == q.nrows());
         nearest_rows(
             d.as_ref(),
             q.as_ref(),
-            None,
-            &search_params(d.as_ref(), cells),
+            hint,
+            &search_params(d.as_ref(), cells, hint.is_some()),
         )
         .map_err(fmaps_solve::Error::Search)
     };
+    let (hab, hba) = (hints.map(|h| h.0.as_slice()), hints.map(|h| h.1.as_slice()));
     let (ab, ba) = if both {
         report.nn_searches += 2;
         rayon::join(
-            || search(&ey, &ex, sy.cells.as_deref()),
-            || search(&ex, &ey, sx.cells.as_deref()),
+            || search(&ey, &ex, sy.cells.as_deref(), hab),
+            || search(&ex, &ey, sx.cells.as_deref(), hba),
         )
     } else {
         report.nn_searches += 1;
-        (Ok(Vec::new()), search(&ex, &ey, sx.cells.as_deref()))
+        (Ok(Vec::new()), search(&ex, &ey, sx.cells.as_deref(), hba))
     };
     report.nn_seconds += t.elapsed().as_secs_f64();
     Ok((ab?, ba?))
@@ -396,7 +423,9 @@ impl Shells {
 /// One level of the alignment at shell size `k` (weights `wk`): the
 /// correspondences, then the deformation τ (least squares of both
 /// directions' residuals, plus ARAP), then the functional map (least
-/// squares on the correspondences, made orthonormal).
+/// squares on the correspondences, made orthonormal). `hints`: the
+/// previous level's correspondences on the same samples (speed only);
+/// returns this level's.
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn level(
     x: &Shell<'_>,
@@ -408,6 +437,7 @@ pub(crate) fn level(
     w: &LevelWeights,
     arap_gram: Option<&DMatrix<f64>>,
     state: &mut Alignment,
+    hints: Option<&(Vec<usize>, Vec<usize>)>,
     report: &mut RefineReport,
 ) -> Result<(Vec<usize>, Vec<usize>)> {
     let (wk, xs, ys) = (&shells.weights, &shells.x, &shells.y);
@@ -429,6 +459,7 @@ pub(crate) fn level(
         w,
         state.fmap.as_ref(),
         true,
+        hints,
         report,
     )?;
 
@@ -574,6 +605,7 @@ pub(crate) fn alignment_energy(
         w,
         state.fmap.as_ref(),
         true,
+        None,
         report,
     )?;
     let fn_ = normal_scale(&cur, &full_y, w.normals);
@@ -652,7 +684,7 @@ mod tests {
             crate::farthest_point_sampling_with_nearest(&points, crate::search_cells(n), 0);
         let cells: Vec<u32> = nearest.into_iter().map(|c| c as u32).collect();
         for cells in [None, Some(cells.as_slice())] {
-            let params = search_params(data.as_ref(), cells);
+            let params = search_params(data.as_ref(), cells, false);
             if params.strategy != fmaps_nn::NnStrategy::Balls {
                 eprintln!(
                     "skipped: the ball search is not chosen on this CPU (matrix tiles) or with \
@@ -661,6 +693,66 @@ mod tests {
             }
             let got = nearest_rows(data.as_ref(), queries.as_ref(), None, &params).unwrap();
             assert_eq!(got, want, "cells: {}", cells.is_some());
+        }
+    }
+
+    /// The search among samples with guesses (the alignment levels): the
+    /// ball search over the samples' cells from
+    /// [`HINTED_BALLS_FROM_COLS`] columns, brute force below and without
+    /// guesses; every choice answers as brute force does, whatever the
+    /// guesses (right, wrong or out of range).
+    #[test]
+    fn the_search_among_samples_with_guesses_agrees_with_brute_force() {
+        let n = 2000;
+        let embed = |cols: usize, shift: f64| {
+            Mat::from_fn(n, cols, |i, c| {
+                let z = 1.0 - 2.0 * (i as f64 + 0.5) / n as f64;
+                let t = i as f64 * 2.399_963_229_728_653 + shift;
+                let r = (1.0 - z * z).sqrt();
+                let p = [r * t.cos(), r * t.sin(), z];
+                match c {
+                    0..3 => p[c],
+                    3..6 => 0.04 * p[c - 3],
+                    _ => 0.1 * ((c - 5) as f64 * (p[0] + 0.5 * p[1] - 0.3 * p[2]) + shift).sin(),
+                }
+            })
+        };
+        let e = embed(3, 0.0);
+        let points: Vec<[f64; 3]> = (0..n).map(|i| [e[(i, 0)], e[(i, 1)], e[(i, 2)]]).collect();
+        let cells = super::super::posed::surface_cells(&points, n.div_ceil(fmaps_nn::BALL_SIZE));
+        for cols in [HINTED_BALLS_FROM_COLS - 1, HINTED_BALLS_FROM_COLS, 197] {
+            let (data, queries) = (embed(cols, 0.0), embed(cols, 0.011));
+            let want = nearest_rows(
+                data.as_ref(),
+                queries.as_ref(),
+                None,
+                &NnParams::with_strategy(fmaps_nn::NnStrategy::Brute),
+            )
+            .unwrap();
+            // A third right, a third another row, a third out of range.
+            let hints: Vec<usize> = (0..n)
+                .map(|i| match i % 3 {
+                    0 => want[i],
+                    1 => (want[i] + 17 * i) % n,
+                    _ => n + i,
+                })
+                .collect();
+            for hinted in [false, true] {
+                let params = search_params(data.as_ref(), Some(&cells), hinted);
+                let balls = params.strategy == fmaps_nn::NnStrategy::Balls;
+                let expected = hinted && cols >= HINTED_BALLS_FROM_COLS;
+                if expected && !balls {
+                    eprintln!(
+                        "skipped: the ball search is not chosen on this CPU (matrix tiles) or \
+                         with FMAPS_NO_BALLS; brute force alone was compared with itself"
+                    );
+                } else {
+                    assert_eq!(balls, expected, "{cols} columns, guesses: {hinted}");
+                }
+                let hint = hinted.then_some(hints.as_slice());
+                let got = nearest_rows(data.as_ref(), queries.as_ref(), hint, &params).unwrap();
+                assert_eq!(got, want, "{cols} columns, guesses: {hinted}");
+            }
         }
     }
 }

@@ -221,8 +221,9 @@ pub(crate) struct Samples<'a> {
     /// Their one-ring ([`Samples::pose`]; none for every vertex).
     ring: Option<Ring>,
     /// Clusters of the rows for the ball search among them
-    /// ([`super::level::correspondences`]), when they are every vertex of
-    /// a large shape.
+    /// ([`super::level::correspondences`]): patches of ~[`fmaps_nn::BALL_SIZE`]
+    /// samples (searched with the previous level's correspondences as
+    /// guesses), or of every vertex of a large shape (one search each).
     pub cells: Option<Vec<u32>>,
 }
 
@@ -235,7 +236,10 @@ impl<'a> Samples<'a> {
             })),
             sqrt_mass: idx.iter().map(|&i| s.mass[i].sqrt()).collect(),
             ring: Some(Ring::new(s, &idx)),
-            cells: None,
+            cells: Some(surface_cells(
+                &idx.iter().map(|&i| s.verts[i]).collect::<Vec<_>>(),
+                idx.len().div_ceil(fmaps_nn::BALL_SIZE),
+            )),
             idx,
         }
     }
@@ -249,11 +253,8 @@ impl<'a> Samples<'a> {
     /// vertices.)
     pub fn all(s: &Shell<'a>, cells: bool) -> Samples<'a> {
         let n = s.verts.len();
-        let cells = (cells && n >= BALLS_FROM_ROWS).then(|| {
-            let (_, nearest) =
-                crate::farthest_point_sampling_with_nearest(&s.verts, crate::search_cells(n), 0);
-            nearest.into_iter().map(|c| c as u32).collect()
-        });
+        let cells = (cells && n >= BALLS_FROM_ROWS)
+            .then(|| surface_cells(&s.verts, crate::search_cells(n)));
         Samples {
             phi: std::borrow::Cow::Borrowed(s.phi),
             sqrt_mass: s.mass.iter().map(|m| m.sqrt()).collect(),
@@ -331,6 +332,14 @@ impl std::ops::Deref for Samples<'_> {
     fn deref(&self) -> &[usize] {
         &self.idx
     }
+}
+
+/// The cells of `m` farthest points among `points` (each point's nearest;
+/// at least one cell): patches of the surface, on which positions,
+/// normals and spectral features are smooth, for the ball search.
+pub(super) fn surface_cells(points: &[[f64; 3]], m: usize) -> Vec<u32> {
+    let (_, nearest) = crate::farthest_point_sampling_with_nearest(points, m.max(1), 0);
+    nearest.into_iter().map(|c| c as u32).collect()
 }
 
 #[cfg(test)]
