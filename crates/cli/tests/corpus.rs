@@ -9,11 +9,11 @@
 
 mod common;
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::Stdio;
 use std::time::{Duration, Instant};
 
-use common::{fmaps, tmpdir};
+use common::{TmpDir, fmaps, tmpdir};
 use fmaps::mesh_io::generate::{disjoint_union, icosphere, translated};
 use fmaps::mesh_io::{TriMesh, write_obj, write_off, write_ply};
 
@@ -348,7 +348,7 @@ fn through_every_subcommand(dir: &Path, name: &str) -> Vec<(String, i32)> {
 
 /// The corpus directory: the nasty meshes, good.off with the identity
 /// map and ground truth.
-fn corpus_dir(tag: &str) -> PathBuf {
+fn corpus_dir(tag: &str) -> TmpDir {
     let dir = tmpdir(tag);
     for (name, bytes) in mesh_corpus() {
         std::fs::write(dir.join(name), bytes).unwrap();

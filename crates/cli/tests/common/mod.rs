@@ -64,8 +64,40 @@ pub fn grid_fixture(dir: &std::path::Path) -> (fmaps::mesh_io::TriMesh, Vec<usiz
     (m, all)
 }
 
-pub fn tmpdir(name: &str) -> PathBuf {
+/// A fresh directory for one test, removed when dropped (also when the
+/// test fails: nothing is left in the system's temporary directory).
+pub struct TmpDir(PathBuf);
+
+impl std::ops::Deref for TmpDir {
+    type Target = std::path::Path;
+    fn deref(&self) -> &std::path::Path {
+        &self.0
+    }
+}
+
+impl AsRef<std::path::Path> for TmpDir {
+    fn as_ref(&self) -> &std::path::Path {
+        &self.0
+    }
+}
+
+impl AsRef<std::ffi::OsStr> for TmpDir {
+    fn as_ref(&self) -> &std::ffi::OsStr {
+        self.0.as_os_str()
+    }
+}
+
+impl Drop for TmpDir {
+    fn drop(&mut self) {
+        // (Already gone where a test removed it itself.)
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
+}
+
+pub fn tmpdir(name: &str) -> TmpDir {
     let d = std::env::temp_dir().join(format!("fmaps-cli-{name}-{}", std::process::id()));
+    // A directory left by an earlier run with the same process id.
+    let _ = std::fs::remove_dir_all(&d);
     std::fs::create_dir_all(&d).unwrap();
-    d
+    TmpDir(d)
 }
