@@ -94,6 +94,22 @@ fn f32_bands_cover_underflow() {
     }
 }
 
+/// Rows repeated all over the data (each of seven rows 171 or 172 times):
+/// every panel of the fused search holds a copy of each query's nearest
+/// row, so all 75 panels are within the band and every copy is
+/// re-checked; the tie still goes to the first copy.
+#[test]
+fn fused_search_keeps_the_first_of_many_tied_rows() {
+    let (nx, d) = (1200, 8);
+    let x = DMatrix::from_fn(nx, d, |i, j| (((i % 7) * 13 + j * 5) % 17) as f64 / 17.0);
+    let q = DMatrix::from_fn(50, d, |i, j| ((i * 3 + j * 7) % 19) as f64 / 19.0);
+    let want = naive(&x, &q);
+    assert!(want.iter().all(|&w| w < 7), "the first copies win ties");
+    let got = brute_search(&x, &q);
+    assert_eq!(got, want);
+    assert_eq!(BruteData::new(&x).panels.len() / (d * PANEL), 75);
+}
+
 /// Far outside f32's range (coordinates 1e±30 and 1e±150: underflow
 /// and overflow of the f32 products and inputs) every strategy agrees with the naive
 /// search, through the power-of-two scaling.
