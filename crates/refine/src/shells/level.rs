@@ -646,6 +646,40 @@ mod tests {
         assert_eq!(shell_weights(1), vec![1.0]);
     }
 
+    /// Each query's nearest data row by brute force.
+    fn brute(data: &Mat<f64>, queries: &Mat<f64>) -> Vec<usize> {
+        let params = NnParams::with_strategy(fmaps_nn::NnStrategy::Brute);
+        nearest_rows(data.as_ref(), queries.as_ref(), None, &params).unwrap()
+    }
+
+    /// A product embedding of a Fibonacci sphere (`n` evenly spread
+    /// points, turned by `shift` about the axis): the points, the normals
+    /// times `normals`, then smooth "spectral" features of amplitude `amp`
+    /// along `dir`.
+    fn sphere_embedding(
+        n: usize,
+        cols: usize,
+        shift: f64,
+        normals: f64,
+        amp: f64,
+        dir: [f64; 3],
+    ) -> Mat<f64> {
+        Mat::from_fn(n, cols, |i, c| {
+            let z = 1.0 - 2.0 * (i as f64 + 0.5) / n as f64;
+            let t = i as f64 * 2.399_963_229_728_653 + shift;
+            let r = (1.0 - z * z).sqrt();
+            let p = [r * t.cos(), r * t.sin(), z];
+            match c {
+                0..3 => p[c],
+                3..6 => normals * p[c - 3],
+                _ => {
+                    let along = dir[0] * p[0] + dir[1] * p[1] + dir[2] * p[2];
+                    amp * ((c - 5) as f64 * along + shift).sin()
+                }
+            }
+        })
+    }
+
     /// The final point map's search on many rows (the ball search where
     /// it pays) answers as brute force does: rows of a product embedding
     /// of a sphere (points, normals, smooth "spectral" features), queries
@@ -653,36 +687,15 @@ mod tests {
     #[test]
     fn the_search_on_every_vertex_agrees_with_brute_force() {
         let n = BALLS_FROM_ROWS + 904;
-        let embed = |shift: f64| {
-            Mat::from_fn(n, 3 + 3 + 20, |i, c| {
-                // A Fibonacci sphere: evenly spread points.
-                let z = 1.0 - 2.0 * (i as f64 + 0.5) / n as f64;
-                let t = i as f64 * 2.399_963_229_728_653 + shift;
-                let r = (1.0 - z * z).sqrt();
-                let p = [r * t.cos(), r * t.sin(), z];
-                match c {
-                    0..3 => p[c],
-                    3..6 => 0.3 * p[c - 3],
-                    _ => 0.2 * ((c - 5) as f64 * (p[0] + 0.5 * p[1]) + shift).sin(),
-                }
-            })
-        };
+        let embed = |shift| sphere_embedding(n, 3 + 3 + 20, shift, 0.3, 0.2, [1.0, 0.5, 0.0]);
         let (data, queries) = (embed(0.0), embed(0.013));
-        let want = nearest_rows(
-            data.as_ref(),
-            queries.as_ref(),
-            None,
-            &NnParams::with_strategy(fmaps_nn::NnStrategy::Brute),
-        )
-        .unwrap();
+        let want = brute(&data, &queries);
         // k-means clusters of the rows, and cells of farthest points on
         // the surface (as `Samples::all` makes them).
         let points: Vec<[f64; 3]> = (0..n)
             .map(|i| [data[(i, 0)], data[(i, 1)], data[(i, 2)]])
             .collect();
-        let (_, nearest) =
-            crate::farthest_point_sampling_with_nearest(&points, crate::search_cells(n), 0);
-        let cells: Vec<u32> = nearest.into_iter().map(|c| c as u32).collect();
+        let cells = super::super::posed::surface_cells(&points, crate::search_cells(n));
         for cells in [None, Some(cells.as_slice())] {
             let params = search_params(data.as_ref(), cells, false);
             if params.strategy != fmaps_nn::NnStrategy::Balls {
@@ -704,31 +717,13 @@ mod tests {
     #[test]
     fn the_search_among_samples_with_guesses_agrees_with_brute_force() {
         let n = 2000;
-        let embed = |cols: usize, shift: f64| {
-            Mat::from_fn(n, cols, |i, c| {
-                let z = 1.0 - 2.0 * (i as f64 + 0.5) / n as f64;
-                let t = i as f64 * 2.399_963_229_728_653 + shift;
-                let r = (1.0 - z * z).sqrt();
-                let p = [r * t.cos(), r * t.sin(), z];
-                match c {
-                    0..3 => p[c],
-                    3..6 => 0.04 * p[c - 3],
-                    _ => 0.1 * ((c - 5) as f64 * (p[0] + 0.5 * p[1] - 0.3 * p[2]) + shift).sin(),
-                }
-            })
-        };
+        let embed = |cols, shift| sphere_embedding(n, cols, shift, 0.04, 0.1, [1.0, 0.5, -0.3]);
         let e = embed(3, 0.0);
         let points: Vec<[f64; 3]> = (0..n).map(|i| [e[(i, 0)], e[(i, 1)], e[(i, 2)]]).collect();
         let cells = super::super::posed::surface_cells(&points, n.div_ceil(fmaps_nn::BALL_SIZE));
         for cols in [HINTED_BALLS_FROM_COLS - 1, HINTED_BALLS_FROM_COLS, 197] {
             let (data, queries) = (embed(cols, 0.0), embed(cols, 0.011));
-            let want = nearest_rows(
-                data.as_ref(),
-                queries.as_ref(),
-                None,
-                &NnParams::with_strategy(fmaps_nn::NnStrategy::Brute),
-            )
-            .unwrap();
+            let want = brute(&data, &queries);
             // A third right, a third another row, a third out of range.
             let hints: Vec<usize> = (0..n)
                 .map(|i| match i % 3 {
