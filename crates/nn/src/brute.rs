@@ -126,9 +126,9 @@ impl BruteData {
             .map(|&q0| {
                 let rows = q0..(q0 + FUSED_BLOCK).min(nq);
                 if wide {
-                    self.fused_block::<WIDE_GROUP>(&q_rows, rows)
+                    self.fused_block::<WIDE_GROUP>(&q_rows, rows, None)
                 } else {
-                    self.fused_block::<GROUP>(&q_rows, rows)
+                    self.fused_block::<GROUP>(&q_rows, rows, None)
                 }
             })
             .collect();
@@ -141,6 +141,7 @@ impl BruteData {
         &self,
         q_rows: &[f64],
         rows: std::ops::Range<usize>,
+        mut col_min: Option<&mut [f32]>,
     ) -> Vec<usize> {
         let (nx, d) = (self.x_norm.len(), self.d);
         let np = nx.div_ceil(PANEL);
@@ -164,9 +165,26 @@ impl BruteData {
                     }
                 }
                 let best = fused_scores::<G>(&self.panels, &self.panel_norms, d, c, scores);
+                let q_norms: [f64; G] = std::array::from_fn(|g| {
+                    q_rows[(g0 + g.min(gn - 1)) * d..(g0 + g.min(gn - 1) + 1) * d]
+                        .iter()
+                        .map(|v| v * v)
+                        .sum()
+                });
+                if let Some(cm) = col_min.as_deref_mut() {
+                    let gi = (g0 - rows.start) / G;
+                    let cm = &mut cm[gi * np * PANEL..(gi + 1) * np * PANEL];
+                    for (g, &qn) in q_norms.iter().enumerate().take(gn) {
+                        col_min_update(
+                            &scores[g * np * PANEL..(g + 1) * np * PANEL],
+                            qn as f32,
+                            cm,
+                        );
+                    }
+                }
                 for (g, &b) in best.iter().enumerate().take(gn) {
                     let qi = &q_rows[(g0 + g) * d..(g0 + g + 1) * d];
-                    let q_norm: f64 = qi.iter().map(|v| v * v).sum();
+                    let q_norm = q_norms[g];
                     let band = 2.0 * fused_err(d, q_norm, self.x_norm_max);
                     let col = &scores[g * np * PANEL..(g + 1) * np * PANEL];
                     out.push(fused_pick(&self.x_rows, col, nx, b, qi, band));
@@ -174,6 +192,75 @@ impl BruteData {
             }
         });
         out
+    }
+
+    /// [`BruteData::search`] and at once the reverse search: for each
+    /// data row its nearest query row (ties to the smallest index), from
+    /// the same f32 products. Each group of queries scored together
+    /// ([`WIDE_GROUP`] or [`GROUP`]) keeps, per data row, the smallest of
+    /// its approximate squared distances `|x|² − 2 q·x + |q|²` to the
+    /// group's queries ([`col_min_update`], on the scores while they are
+    /// in the first-level cache); a data row's groups within
+    /// [`both_err`]'s band of its smallest are re-checked in f64, query by
+    /// query ([`reverse_panel`]). `None` outside the fused search's widths
+    /// or without queries.
+    pub(crate) fn search_both(&self, queries: &DMatrix<f64>) -> Option<(Vec<usize>, Vec<usize>)> {
+        if self.panels.is_empty() || queries.nrows() == 0 {
+            return None;
+        }
+        let (nx, d) = (self.x_norm.len(), self.d);
+        let np = nx.div_ceil(PANEL);
+        let q_rows = row_major(queries, None);
+        let nq = queries.nrows();
+        #[cfg(target_arch = "x86_64")]
+        let wide = crate::cpu::has_v4();
+        #[cfg(not(target_arch = "x86_64"))]
+        let wide = false;
+        let group = if wide { WIDE_GROUP } else { GROUP };
+        let starts: Vec<usize> = (0..nq).step_by(FUSED_BLOCK).collect();
+        let blocks: Vec<(Vec<usize>, Vec<f32>)> = starts
+            .par_iter()
+            .map(|&q0| {
+                let rows = q0..(q0 + FUSED_BLOCK).min(nq);
+                let mut col_min = vec![f32::INFINITY; rows.len().div_ceil(group) * np * PANEL];
+                let found = if wide {
+                    self.fused_block::<WIDE_GROUP>(&q_rows, rows, Some(&mut col_min))
+                } else {
+                    self.fused_block::<GROUP>(&q_rows, rows, Some(&mut col_min))
+                };
+                (found, col_min)
+            })
+            .collect();
+        let q_norm_max = q_rows
+            .chunks_exact(d)
+            .map(|r| r.iter().map(|v| v * v).sum::<f64>())
+            .fold(0.0f64, f64::max);
+        // Every group's smallest distances (`np * PANEL` each), group
+        // after group: group `gi` holds queries `gi * group..` (the blocks
+        // are whole groups but the last).
+        let mins: Vec<&[f32]> = blocks
+            .iter()
+            .flat_map(|b| b.1.chunks_exact(np * PANEL))
+            .collect();
+        let ctx = Reverse {
+            mins: &mins,
+            group,
+            x_rows: &self.x_rows,
+            x_norm: &self.x_norm,
+            q_rows: &q_rows,
+            q_norm_max,
+            d,
+        };
+        let reverse: Vec<usize> = (0..np)
+            .into_par_iter()
+            .flat_map_iter(|p| {
+                let mut out = [usize::MAX; PANEL];
+                let rows = p * PANEL..((p + 1) * PANEL).min(nx);
+                reverse_panel(&ctx, p, &mut out[..rows.len()]);
+                out.into_iter().take(rows.len())
+            })
+            .collect();
+        Some((blocks.into_iter().flat_map(|b| b.0).collect(), reverse))
     }
 
     /// The nearest data row of every query (same width as the data).
@@ -388,6 +475,36 @@ pub(crate) fn fused_err(d: usize, q_norm: f64, x_norm_max: f64) -> f64 {
         + tiny * (2.0 * df.sqrt() * (q_norm.sqrt() + x_norm_max.sqrt()) + 2.0 * df + 1.0))
 }
 
+/// What [`reverse_panel`] reads: every group's smallest approximate
+/// squared distances to the data rows (`mins`, one slice of whole panels
+/// per group of `group` queries), the data rows and their squared norms,
+/// the queries (row-major) and their largest squared norm.
+#[derive(Clone, Copy)]
+struct Reverse<'a> {
+    mins: &'a [&'a [f32]],
+    group: usize,
+    x_rows: &'a [f64],
+    x_norm: &'a [f64],
+    q_rows: &'a [f64],
+    q_norm_max: f64,
+    d: usize,
+}
+
+/// The band [`BruteData::search_both`] re-checks for a data row of
+/// squared norm `x_norm` against queries of squared norms at most
+/// `q_norm_max`: twice a bound on the error of each approximate squared
+/// distance `(|x|² − 2 q·x) + |q|²` in f32. The fused score's error is
+/// half of [`fused_err`] (its bound is symmetric in the two norms); `|q|²`
+/// rounded to f32 adds `u |q|²`, the sum's rounding `u (|q| + |x|)² ≤
+/// 2u (|q|² + |x|²)`, and f32's smallest normal covers what falls below
+/// the normal range. Doubled here with a margin: the band also holds
+/// the smallest value's own error.
+pub(crate) fn both_err(d: usize, x_norm: f64, q_norm_max: f64) -> f64 {
+    let u = f64::from(f32::EPSILON) / 2.0;
+    let tiny = f64::from(f32::MIN_POSITIVE);
+    2.0 * fused_err(d, x_norm, q_norm_max) + 8.0 * u * (x_norm + q_norm_max) + 8.0 * tiny
+}
+
 /// The fused search's products: the scores of `G` queries (`c`: their
 /// coordinates times −2, coordinate by coordinate: `c[j * G + g]` is
 /// coordinate `j` of query `g`) against every panel, written to `scores`
@@ -520,6 +637,57 @@ pub(crate) unsafe fn fused_scores_avx512(
         }
     }
     lanes.map(|l| _mm512_reduce_min_ps(l))
+}
+
+crate::cpu::dispatched! {
+    /// [`BruteData::search_both`]'s reverse answers for the data rows of
+    /// panel `p` (`out`: one per row): the smallest of each row's group
+    /// minima, then the queries of the groups within [`both_err`]'s band
+    /// of it, in order, by their f64 distances.
+    fn reverse_panel(r: &Reverse<'_>, p: usize, out: &mut [usize]) -> () {
+        let Reverse { mins, group, x_rows, x_norm, q_rows, q_norm_max, d } = *r;
+        let nq = q_rows.len() / d;
+        let mut smallest = [f32::INFINITY; PANEL];
+        for m in mins {
+            let m: &[f32; PANEL] = m[p * PANEL..(p + 1) * PANEL].try_into().expect("panel");
+            for (s, &v) in smallest.iter_mut().zip(m) {
+                *s = if v < *s { v } else { *s };
+            }
+        }
+        for (l, o) in out.iter_mut().enumerate() {
+            let k = p * PANEL + l;
+            let xk = &x_rows[k * d..(k + 1) * d];
+            let limit = (f64::from(smallest[l]) + both_err(d, x_norm[k], q_norm_max)) as f32;
+            let limit = if limit.is_finite() { limit.next_up() } else { limit };
+            let (mut arg, mut best) = (usize::MAX, f64::INFINITY);
+            for (gi, m) in mins.iter().enumerate() {
+                if !(m[k] <= limit) {
+                    continue;
+                }
+                for i in gi * group..((gi + 1) * group).min(nq) {
+                    if let Some(dist) = dist2_below(&q_rows[i * d..(i + 1) * d], xk, best)
+                        && dist < best
+                    {
+                        best = dist;
+                        arg = i;
+                    }
+                }
+            }
+            *o = arg;
+        }
+    }
+}
+
+crate::cpu::dispatched! {
+    /// Each data row's smallest approximate squared distance so far:
+    /// `col_min[k]` lowered to `col[k] + q_norm` (`col`: one query's fused
+    /// scores, `q_norm`: its squared norm in f32).
+    fn col_min_update(col: &[f32], q_norm: f32, col_min: &mut [f32]) -> () {
+        for (m, &s) in col_min.iter_mut().zip(col) {
+            let v = s + q_norm;
+            *m = if v < *m { v } else { *m };
+        }
+    }
 }
 
 crate::cpu::dispatched! {

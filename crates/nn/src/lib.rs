@@ -39,8 +39,10 @@
 //! f32 minimum. The band used is twice that. Coordinates far outside f32's
 //! range are first scaled by one power of two (exact in f64).
 //!
-//! The one entry point is [`nearest_rows`]: faer views of any layout in,
-//! optional guesses, knobs in [`NnParams`]:
+//! The main entry point is [`nearest_rows`]: faer views of any layout in,
+//! optional guesses, knobs in [`NnParams`] ([`nearest_rows_both`] answers
+//! both ways between two point sets from one pass of products, up to 32
+//! coordinates):
 //!
 //! ```
 //! use faer::Mat;
@@ -368,6 +370,55 @@ pub fn nearest_rows(
         hint,
         partition,
     ))
+}
+
+/// Nearest rows both ways by brute force: for each row of `a` its
+/// nearest row of `b`, and for each row of `b` its nearest row of `a`
+/// (ties to the smallest index) — what `nearest_rows(b, a, ..)` and
+/// `nearest_rows(a, b, ..)` with [`NnStrategy::Brute`] return, and with
+/// the same errors. Up to the fused kernel's width (32 coordinates) one
+/// pass of f32 products serves both directions (the reverse one keeps
+/// each row's smallest approximate distance per block of queries and
+/// re-checks, in f64, the blocks within a rigorous band of it); wider,
+/// two searches.
+///
+/// ```
+/// use fmaps_nn::{nearest_rows_both, view};
+/// use nalgebra::DMatrix;
+/// let a = DMatrix::from_row_slice(3, 2, &[0.0, 0.0, 1.0, 0.0, 5.0, 5.0]);
+/// let b = DMatrix::from_row_slice(2, 2, &[0.9, 0.1, 4.0, 4.0]);
+/// let (ab, ba) = nearest_rows_both(view(&a), view(&b)).unwrap();
+/// assert_eq!(ab, vec![0, 0, 1]);
+/// assert_eq!(ba, vec![1, 2]);
+/// ```
+pub fn nearest_rows_both(
+    a: MatRef<'_, f64>,
+    b: MatRef<'_, f64>,
+) -> Result<(Vec<usize>, Vec<usize>)> {
+    let brute = NnParams::with_strategy(NnStrategy::Brute);
+    let d = b.ncols();
+    if a.ncols() != d || a.nrows() == 0 || b.nrows() == 0 || !(1..=FUSED_MAX_DIM).contains(&d) {
+        let (ab, ba) = rayon::join(
+            || nearest_rows(b, a, None, &brute),
+            || nearest_rows(a, b, None, &brute),
+        );
+        return Ok((ab?, ba?));
+    }
+    check_finite(b, "data")?;
+    check_finite(a, "query")?;
+    let (x, q) = (owned(b), owned(a));
+    let scaled = power_of_two_scale(&x, &q).map(|s| (&x * s, &q * s));
+    let (x, q) = match &scaled {
+        Some((x, q)) => (x, q),
+        None => (&x, &q),
+    };
+    match BruteData::new(x).search_both(q) {
+        Some(found) => Ok(found),
+        None => {
+            let (ab, ba) = rayon::join(|| brute_search(x, q), || brute_search(q, x));
+            Ok((ab, ba))
+        }
+    }
 }
 
 /// Checks the queries and guesses against `nx` data rows of `d`

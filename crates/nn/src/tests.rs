@@ -110,6 +110,57 @@ fn fused_search_keeps_the_first_of_many_tied_rows() {
     assert_eq!(BruteData::new(&x).panels.len() / (d * PANEL), 75);
 }
 
+/// Both directions at once answer as two naive searches: odd sizes (not
+/// whole blocks or panels), widths from 1 to past the fused kernel's,
+/// rows repeated (ties to the first), far outside f32's range, where the
+/// f32 products underflow, and clusters far from the origin whose
+/// distances f32 cannot tell apart (there a band of zero returns other
+/// rows: the re-check in f64 decides).
+#[test]
+fn both_directions_at_once_agree_with_two_naive_searches() {
+    let cases = [
+        (130, 97, 1, 0.0, 1.0, 7),
+        (200, 331, 5, 0.0, 1.0, 7),
+        (517, 260, 20, 0.0, 1.0, 7),
+        (300, 300, 32, 0.0, 1.0, 7),
+        (150, 170, 33, 0.0, 1.0, 7),
+        (260, 140, 12, 0.0, 1e-30, 7),
+        (260, 140, 12, 1.0, 1e-40, 7),
+        (260, 140, 12, 0.0, 1e30, 7),
+        (64, 1, 7, 0.0, 1.0, 7),
+        (400, 300, 12, 30.0, 1e-4, 389),
+        (333, 250, 24, 10.0, 1e-5, 331),
+    ];
+    for (na, nb, d, offset, spread, distinct) in cases {
+        // `distinct` rows of `a`, repeated; `b` spread out.
+        let a = DMatrix::from_fn(na, d, |i, j| {
+            offset
+                + spread * ((((i % distinct) * 13 + j * 5) % 17) as f64 - 8.0)
+                + spread * (((i % distinct) * 31 + j * 3) % 29) as f64 / 29.0
+        });
+        let b = DMatrix::from_fn(nb, d, |i, j| {
+            offset + spread * (((i * 53 + j * 7) % 97) as f64 / 6.0 - 8.0)
+        });
+        let (ab, ba) = crate::nearest_rows_both(view(&a), view(&b)).unwrap();
+        assert_eq!(
+            ab,
+            naive(&b, &a),
+            "a -> b: {na} x {nb}, {d} columns, {spread:e}"
+        );
+        assert_eq!(
+            ba,
+            naive(&a, &b),
+            "b -> a: {na} x {nb}, {d} columns, {spread:e}"
+        );
+        assert!(
+            ba.iter().all(|&i| i < distinct),
+            "ties go to the first copy"
+        );
+    }
+    let (a, b) = (DMatrix::zeros(3, 4), DMatrix::zeros(2, 5));
+    assert!(crate::nearest_rows_both(view(&a), view(&b)).is_err());
+}
+
 /// Far outside f32's range (coordinates 1e±30 and 1e±150: underflow
 /// and overflow of the f32 products and inputs) every strategy agrees with the naive
 /// search, through the power-of-two scaling.

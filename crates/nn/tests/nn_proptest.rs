@@ -2,12 +2,13 @@
 //! point sets: sizes that do not fill the tiles' blocks, dimensions that
 //! do not fill their 32-coordinate steps, offsets and scales where bf16
 //! resolves little, duplicated rows, queries on or between rows, and
-//! guesses that are right, wrong or out of range.
+//! guesses that are right, wrong or out of range; and both directions at
+//! once (`nearest_rows_both`).
 
 mod common;
 use common::{naive_nearest, nearest_rows_hinted_with, nearest_rows_with};
 use faer::MatRef;
-use fmaps_nn::{NnParams, NnStrategy, nearest_rows};
+use fmaps_nn::{NnParams, NnStrategy, nearest_rows, nearest_rows_both, view};
 use nalgebra::DMatrix;
 use proptest::prelude::*;
 
@@ -56,6 +57,10 @@ proptest! {
             _ => offset + scale * (rnd() - 0.5),
         });
         let want = naive_nearest(&x, &q);
+        // Both ways at once (the fused kernel up to 32 coordinates).
+        let (qx, xq) = nearest_rows_both(view(&q), view(&x)).unwrap();
+        prop_assert_eq!(&qx, &want, "both ways: queries to rows");
+        prop_assert_eq!(&xq, &naive_nearest(&q, &x), "both ways: rows to queries");
         for strategy in [NnStrategy::Auto, NnStrategy::Brute, NnStrategy::Tree, NnStrategy::Prefix, NnStrategy::Balls, NnStrategy::Tiles] {
             prop_assert_eq!(&nearest_rows_with(&x, &q, strategy), &want, "{:?}", strategy);
         }

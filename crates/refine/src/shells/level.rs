@@ -4,7 +4,7 @@
 //! [`super::arap`]).
 
 use faer::{Mat, MatRef};
-use fmaps_nn::{NnParams, nearest_rows};
+use fmaps_nn::{NnParams, nearest_rows, nearest_rows_both};
 use nalgebra::{DMatrix, Matrix3, Vector3};
 
 use super::arap::rotations;
@@ -377,26 +377,37 @@ pub(crate) fn correspondences(
         (embed(px, fnm, fx), embed(py, fnm, fy))
     };
     let t = std::time::Instant::now();
-    let search = |d: &Mat<f64>, q: &Mat<f64>, cells: Option<&[u32]>, hint: Option<&[usize]>| {
+    // The strategy of each direction (data `d`, queries `q`), then the
+    // search with it.
+    fn plan<'h>(
+        d: &Mat<f64>,
+        q: &Mat<f64>,
+        cells: Option<&[u32]>,
+        hint: Option<&'h [usize]>,
+    ) -> (NnParams, Option<&'h [usize]>) {
         let hint = hint.filter(|h| h.len() == q.nrows());
-        nearest_rows(
-            d.as_ref(),
-            q.as_ref(),
-            hint,
-            &search_params(d.as_ref(), cells, hint.is_some()),
-        )
-        .map_err(fmaps_solve::Error::Search)
+        (search_params(d.as_ref(), cells, hint.is_some()), hint)
+    }
+    let search = |d: &Mat<f64>, q: &Mat<f64>, (params, hint): (NnParams, Option<&[usize]>)| {
+        nearest_rows(d.as_ref(), q.as_ref(), hint, &params).map_err(fmaps_solve::Error::Search)
     };
     let (hab, hba) = (hints.map(|h| h.0.as_slice()), hints.map(|h| h.1.as_slice()));
+    let pba = plan(&ex, &ey, sx.cells.as_deref(), hba);
     let (ab, ba) = if both {
         report.nn_searches += 2;
-        rayon::join(
-            || search(&ey, &ex, sy.cells.as_deref(), hab),
-            || search(&ex, &ey, sx.cells.as_deref(), hba),
-        )
+        let pab = plan(&ey, &ex, sy.cells.as_deref(), hab);
+        let brute = fmaps_nn::NnStrategy::Brute;
+        if pab.0.strategy == brute && pba.0.strategy == brute {
+            // Both ways from one pass of products (the same answers).
+            let (ab, ba) =
+                nearest_rows_both(ex.as_ref(), ey.as_ref()).map_err(fmaps_solve::Error::Search)?;
+            (Ok(ab), Ok(ba))
+        } else {
+            rayon::join(|| search(&ey, &ex, pab), || search(&ex, &ey, pba))
+        }
     } else {
         report.nn_searches += 1;
-        (Ok(Vec::new()), search(&ex, &ey, sx.cells.as_deref(), hba))
+        (Ok(Vec::new()), search(&ex, &ey, pba))
     };
     report.nn_seconds += t.elapsed().as_secs_f64();
     Ok((ab?, ba?))
