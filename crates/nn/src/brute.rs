@@ -654,26 +654,38 @@ crate::cpu::dispatched! {
                 *s = if v < *s { v } else { *s };
             }
         }
-        for (l, o) in out.iter_mut().enumerate() {
+        // Each row's limit (rows past the data: none pass).
+        let mut limit = [f32::NEG_INFINITY; PANEL];
+        for (l, lim) in limit.iter_mut().enumerate().take(out.len()) {
             let k = p * PANEL + l;
-            let xk = &x_rows[k * d..(k + 1) * d];
-            let limit = (f64::from(smallest[l]) + both_err(d, x_norm[k], q_norm_max)) as f32;
-            let limit = if limit.is_finite() { limit.next_up() } else { limit };
-            let (mut arg, mut best) = (usize::MAX, f64::INFINITY);
-            for (gi, m) in mins.iter().enumerate() {
-                if !(m[k] <= limit) {
-                    continue;
-                }
+            let v = (f64::from(smallest[l]) + both_err(d, x_norm[k], q_norm_max)) as f32;
+            *lim = if v.is_finite() { v.next_up() } else { v };
+        }
+        // The groups in order; in each, the rows it passes (one compare
+        // for the panel's sixteen), their queries in order by f64 distance.
+        let mut best = [(f64::INFINITY, usize::MAX); PANEL];
+        for (gi, m) in mins.iter().enumerate() {
+            let m: &[f32; PANEL] = m[p * PANEL..(p + 1) * PANEL].try_into().expect("panel");
+            let mut mask = 0u32;
+            for l in 0..PANEL {
+                mask |= u32::from(m[l] <= limit[l]) << l;
+            }
+            while mask != 0 {
+                let l = mask.trailing_zeros() as usize;
+                mask &= mask - 1;
+                let k = p * PANEL + l;
+                let xk = &x_rows[k * d..(k + 1) * d];
                 for i in gi * group..((gi + 1) * group).min(nq) {
-                    if let Some(dist) = dist2_below(&q_rows[i * d..(i + 1) * d], xk, best)
-                        && dist < best
+                    if let Some(dist) = dist2_below(&q_rows[i * d..(i + 1) * d], xk, best[l].0)
+                        && dist < best[l].0
                     {
-                        best = dist;
-                        arg = i;
+                        best[l] = (dist, i);
                     }
                 }
             }
-            *o = arg;
+        }
+        for (o, b) in out.iter_mut().zip(best) {
+            *o = b.1;
         }
     }
 }
