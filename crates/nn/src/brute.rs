@@ -115,24 +115,38 @@ impl BruteData {
     /// band of its best score re-checked in f64.
     fn search_fused(&self, queries: &DMatrix<f64>) -> Vec<usize> {
         let q_rows = row_major(queries, None);
-        let nq = queries.nrows();
-        #[cfg(target_arch = "x86_64")]
-        let wide = crate::cpu::has_v4();
-        #[cfg(not(target_arch = "x86_64"))]
-        let wide = false;
+        let blocks = self.fused_blocks(&q_rows, false);
+        blocks.into_iter().flat_map(|b| b.0).collect()
+    }
+
+    /// The queries `q_rows` (row-major) by blocks of [`FUSED_BLOCK`] in
+    /// parallel: each block's answers and, with `reverse`, its groups'
+    /// smallest approximate squared distances to every data row (see
+    /// [`BruteData::search_both`]; else empty).
+    fn fused_blocks(&self, q_rows: &[f64], reverse: bool) -> Vec<(Vec<usize>, Vec<f32>)> {
+        let nq = q_rows.len() / self.d;
+        let np = self.x_norm.len().div_ceil(PANEL);
+        let wide = wide_kernel();
+        let group = if wide { WIDE_GROUP } else { GROUP };
         let starts: Vec<usize> = (0..nq).step_by(FUSED_BLOCK).collect();
-        let blocks: Vec<Vec<usize>> = starts
+        starts
             .par_iter()
             .map(|&q0| {
                 let rows = q0..(q0 + FUSED_BLOCK).min(nq);
-                if wide {
-                    self.fused_block::<WIDE_GROUP>(&q_rows, rows, None)
+                let mut col_min = if reverse {
+                    vec![f32::INFINITY; rows.len().div_ceil(group) * np * PANEL]
                 } else {
-                    self.fused_block::<GROUP>(&q_rows, rows, None)
-                }
+                    Vec::new()
+                };
+                let cm = reverse.then_some(col_min.as_mut_slice());
+                let found = if wide {
+                    self.fused_block::<WIDE_GROUP>(q_rows, rows, cm)
+                } else {
+                    self.fused_block::<GROUP>(q_rows, rows, cm)
+                };
+                (found, col_min)
             })
-            .collect();
-        blocks.into_iter().flatten().collect()
+            .collect()
     }
 
     /// [`BruteData::search_fused`] for the queries `rows` (of the
@@ -211,26 +225,8 @@ impl BruteData {
         let (nx, d) = (self.x_norm.len(), self.d);
         let np = nx.div_ceil(PANEL);
         let q_rows = row_major(queries, None);
-        let nq = queries.nrows();
-        #[cfg(target_arch = "x86_64")]
-        let wide = crate::cpu::has_v4();
-        #[cfg(not(target_arch = "x86_64"))]
-        let wide = false;
-        let group = if wide { WIDE_GROUP } else { GROUP };
-        let starts: Vec<usize> = (0..nq).step_by(FUSED_BLOCK).collect();
-        let blocks: Vec<(Vec<usize>, Vec<f32>)> = starts
-            .par_iter()
-            .map(|&q0| {
-                let rows = q0..(q0 + FUSED_BLOCK).min(nq);
-                let mut col_min = vec![f32::INFINITY; rows.len().div_ceil(group) * np * PANEL];
-                let found = if wide {
-                    self.fused_block::<WIDE_GROUP>(&q_rows, rows, Some(&mut col_min))
-                } else {
-                    self.fused_block::<GROUP>(&q_rows, rows, Some(&mut col_min))
-                };
-                (found, col_min)
-            })
-            .collect();
+        let group = if wide_kernel() { WIDE_GROUP } else { GROUP };
+        let blocks = self.fused_blocks(&q_rows, true);
         let q_norm_max = q_rows
             .chunks_exact(d)
             .map(|r| r.iter().map(|v| v * v).sum::<f64>())
@@ -473,6 +469,15 @@ pub(crate) fn fused_err(d: usize, q_norm: f64, x_norm_max: f64) -> f64 {
     let df = d as f64;
     2.0 * ((2.0 * df + 4.0) * u * (q_norm + x_norm_max)
         + tiny * (2.0 * df.sqrt() * (q_norm.sqrt() + x_norm_max.sqrt()) + 2.0 * df + 1.0))
+}
+
+/// Whether the fused search runs its AVX-512 kernel ([`WIDE_GROUP`]
+/// queries at a time).
+fn wide_kernel() -> bool {
+    #[cfg(target_arch = "x86_64")]
+    return crate::cpu::has_v4();
+    #[cfg(not(target_arch = "x86_64"))]
+    return false;
 }
 
 /// What [`reverse_panel`] reads: every group's smallest approximate
