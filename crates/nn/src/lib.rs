@@ -378,9 +378,9 @@ pub fn nearest_rows(
 /// `nearest_rows(a, b, ..)` with [`NnStrategy::Brute`] return, and with
 /// the same errors. Up to the fused kernel's width (32 coordinates) one
 /// pass of f32 products serves both directions (the reverse one keeps
-/// each row's smallest approximate distance per block of queries and
-/// re-checks, in f64, the blocks within a rigorous band of it); wider,
-/// two searches.
+/// each row's smallest approximate distance per group of queries scored
+/// together and re-checks, in f64, the groups within a rigorous band of
+/// it); wider, two searches.
 ///
 /// ```
 /// use fmaps_nn::{nearest_rows_both, view};
