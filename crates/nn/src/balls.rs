@@ -23,7 +23,9 @@
 //! A search: the queries sorted by their guesses' clusters and cut into
 //! blocks; per ~512 queries one f32 GEMM against the centres gives every
 //! (query, cluster) ball bound, with the guess's exact distance as upper
-//! bound (without a guess: the nearest cluster's farthest possible row);
+//! bound (a search without guesses first takes for each query the nearest
+//! row of the ball whose centre is nearest; a query whose guess is out of
+//! range: the nearest cluster's farthest possible row);
 //! per block one f32 GEMM of the queries against the directions of the
 //! clusters that pass gives the tangent bounds; each query visits its
 //! surviving clusters nearest bound first, skips rows by their own bound,
@@ -192,6 +194,58 @@ impl BallData {
         self.search_rows(&Rows::of(crate::view(queries)), hint, None)
     }
 
+    /// A guess for every query: the nearest row (in f64, of the query
+    /// multiplied by `scale`) among the rows of the ball whose centre
+    /// scores nearest in f32 (one GEMM against the centres per
+    /// [`SUPER_BLOCK`] queries). Any row is a valid guess: the search only
+    /// takes its exact distance as the first upper bound.
+    fn seed_guesses(&self, queries: &Rows<'_>, scale: Option<f64>) -> Vec<usize> {
+        let (nq, d, m) = (queries.shape().0, self.d, self.ranges.len());
+        let centers = MatRef::from_row_major_slice(&self.centers32, m, d);
+        let chunks: Vec<usize> = (0..nq).step_by(SUPER_BLOCK).collect();
+        let seeds: Vec<Vec<usize>> = chunks
+            .par_iter()
+            .map(|&q0| {
+                let len = SUPER_BLOCK.min(nq - q0);
+                let f = scale.unwrap_or(1.0);
+                let mut q64 = vec![0.0; len * d];
+                for (t, row) in q64.chunks_exact_mut(d).enumerate() {
+                    row.iter_mut()
+                        .zip(queries.row(q0 + t))
+                        .for_each(|(o, &v)| *o = v * f);
+                }
+                let q32: Vec<f32> = q64.iter().map(|&v| v as f32).collect();
+                let mut g = vec![0.0f32; m * len];
+                matmul(
+                    faer::MatMut::from_column_major_slice_mut(&mut g, m, len),
+                    Accum::Replace,
+                    centers,
+                    MatRef::from_row_major_slice(&q32, len, d).transpose(),
+                    1.0,
+                    Par::Seq,
+                );
+                (0..len)
+                    .map(|t| {
+                        let j =
+                            crate::partition::nearest_mean(&g[t * m..(t + 1) * m], &self.c_norm)
+                                .map_or(0, |j| j as usize);
+                        let (start, l) = self.ranges[j];
+                        let q = &q64[t * d..(t + 1) * d];
+                        let mut best = (f64::INFINITY, start);
+                        for p in start..start + l {
+                            let dp = dist2(&self.x_ord[p * d..(p + 1) * d], q);
+                            if dp < best.0 {
+                                best = (dp, p);
+                            }
+                        }
+                        self.order[best.1]
+                    })
+                    .collect()
+            })
+            .collect();
+        seeds.into_iter().flatten().collect()
+    }
+
     /// [`BallData::search`] of the rows `queries`, each multiplied by
     /// `scale` when given (the data's scale).
     pub(crate) fn search_rows(
@@ -201,6 +255,13 @@ impl BallData {
         scale: Option<f64>,
     ) -> Vec<usize> {
         let nq = queries.shape().0;
+        if hint.is_none() && nq > 0 {
+            // No guesses: seed each query with the nearest row of the
+            // ball whose centre is nearest, an upper bound as tight as a
+            // guess (the answer is the same exact argmin with any guess).
+            let seeds = self.seed_guesses(queries, scale);
+            return self.search_rows(queries, Some(&seeds), scale);
+        }
         // Queries grouped by their guess's ball: a block of queries then
         // visits mostly the same balls, which stay in cache.
         let nx = self.order.len();

@@ -38,7 +38,7 @@ crate::cpu::dispatched! {
     /// minima (lane `l` sees `j ≡ l mod 8` in order, keeping the first of
     /// equals), then the least of them, ties to the smaller index — the
     /// plain scan's answer, in SIMD lanes.
-    fn nearest_mean(g: &[f32], c_norm: &[f64]) -> Option<u32> {
+    pub(crate) fn nearest_mean(g: &[f32], c_norm: &[f64]) -> Option<u32> {
         let m = g.len().min(c_norm.len());
         let mut best = [f64::INFINITY; 8];
         let mut arg = [u32::MAX; 8];

@@ -257,14 +257,22 @@ fn ball_search_equals_brute_force_with_any_partition() {
                 let (xt, qt) = (xs.transpose(), qs.transpose());
                 let params = NnParams::with_strategy(NnStrategy::Balls)
                     .with_partition(partitions[0].clone());
-                let found = fmaps_nn::nearest_rows(
-                    faer::MatRef::from_row_major_slice(xt.as_slice(), n, k),
-                    faer::MatRef::from_row_major_slice(qt.as_slice(), n, k),
-                    Some(&shifted),
-                    &params,
-                )
-                .unwrap();
-                assert_eq!(found, want, "k = {k}, map {m}, row-major, x{scale:e}");
+                // With guesses, and without (each query then seeded from
+                // its nearest centre's ball, in the rescaled copy).
+                for hint in [Some(shifted.as_slice()), None] {
+                    let found = fmaps_nn::nearest_rows(
+                        faer::MatRef::from_row_major_slice(xt.as_slice(), n, k),
+                        faer::MatRef::from_row_major_slice(qt.as_slice(), n, k),
+                        hint,
+                        &params,
+                    )
+                    .unwrap();
+                    let how = if hint.is_some() { "guesses" } else { "seeds" };
+                    assert_eq!(
+                        found, want,
+                        "k = {k}, map {m}, row-major, x{scale:e}, {how}"
+                    );
+                }
             }
         }
     }
