@@ -222,3 +222,32 @@ pub(crate) fn dist2_below(a: &[f64], b: &[f64], bound: f64) -> Option<f64> {
 }
 
 pub(crate) use fmaps_simd::dot8;
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// `max_abs_finite` against a plain fold, for row lengths around its
+    /// 32- and 8-wide chunks, with one entry made infinite or NaN at every
+    /// position of a row.
+    #[test]
+    fn max_abs_finite_is_the_plain_maximum_or_none() {
+        for d in [1, 7, 8, 9, 31, 32, 33, 50, 64, 100] {
+            let n = 5;
+            let data: Vec<f64> = (0..n * d)
+                .map(|i| ((i * 37 % 101) as f64 - 50.0) * 1.5f64.powi((i % 13) as i32))
+                .collect();
+            let m = faer::MatRef::from_row_major_slice(&data, n, d);
+            let want = data.iter().fold(0.0f64, |a, v| a.max(v.abs()));
+            assert_eq!(Rows::of(m).max_abs_finite(), Some(want), "d = {d}");
+            for bad in [f64::INFINITY, f64::NEG_INFINITY, f64::NAN] {
+                for at in 0..d {
+                    let mut x = data.clone();
+                    x[2 * d + at] = bad;
+                    let m = faer::MatRef::from_row_major_slice(&x, n, d);
+                    assert_eq!(Rows::of(m).max_abs_finite(), None, "d = {d}, {bad} at {at}");
+                }
+            }
+        }
+    }
+}
