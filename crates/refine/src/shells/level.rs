@@ -498,10 +498,24 @@ pub(crate) fn level(
         }
     }
     let a = view(&sx.phi, kd);
-    let weighted = |w: &dyn Fn(usize) -> f64, cols: usize| {
-        DMatrix::from_fn(sx.len(), cols, |r, c| w(r) * sx.phi[(r, c)])
+    // The samples' first `cols` columns of Φ, row r scaled by w[r] (the
+    // same products as element by element; column by column, no call per
+    // element).
+    let weighted = |w: &[f64], cols: usize| {
+        let mut out = DMatrix::<f64>::zeros(sx.len(), cols);
+        for c in 0..cols {
+            for ((o, &p), &wr) in out
+                .column_mut(c)
+                .iter_mut()
+                .zip(sx.phi.column(c).iter())
+                .zip(w)
+            {
+                *o = wr * p;
+            }
+        }
+        out
     };
-    let ca = weighted(&|r| count[r], kd);
+    let ca = weighted(&count, kd);
     let mut m = mul_ref(view(&ca, kd), true, a);
     let mut z = mul_ref(a, true, view(&res, 3));
     if let (Some(g), Some(cur)) = (arap, &cur) {
@@ -530,9 +544,12 @@ pub(crate) fn level(
 
     // Functional map on the correspondences (area weighted).
     let ax = view(&sx.phi, kk);
-    let cm = weighted(&|r| count[r] * sx.sqrt_mass[r] * sx.sqrt_mass[r], kk);
+    let cw: Vec<f64> = (0..sx.len())
+        .map(|r| count[r] * sx.sqrt_mass[r] * sx.sqrt_mass[r])
+        .collect();
+    let cm = weighted(&cw, kk);
     let mm = mul_ref(view(&cm, kk), true, ax);
-    let wx = weighted(&|r| sx.sqrt_mass[r], kk);
+    let wx = weighted(&sx.sqrt_mass, kk);
     let zz = mul_ref(view(&wx, kk), true, view(&partners, kk));
     let mut c = DMatrix::<f64>::zeros(kk, kk);
     if w.laplacian > 0.0 {
