@@ -71,8 +71,16 @@ pub(crate) struct BruteData {
 
 impl BruteData {
     pub(crate) fn new(data: &DMatrix<f64>) -> BruteData {
-        let d = data.ncols();
-        let x_rows = row_major(data, None);
+        BruteData::from_rows(row_major(data, None), data.ncols())
+    }
+
+    /// The data rows (row-major).
+    pub(crate) fn rows(&self) -> &[f64] {
+        &self.x_rows
+    }
+
+    /// [`BruteData::new`] of the rows `x_rows` (row-major, `d` wide).
+    pub(crate) fn from_rows(x_rows: Vec<f64>, d: usize) -> BruteData {
         let x_norm: Vec<f64> = x_rows
             .chunks(d.max(1))
             .map(|r| r.iter().map(|v| v * v).sum())
@@ -100,7 +108,14 @@ impl BruteData {
             x32: if fused {
                 Vec::new()
             } else {
-                data.as_slice().iter().map(|&v| v as f32).collect()
+                // Column-major.
+                let mut x32 = vec![0.0f32; n * d];
+                for (i, row) in x_rows.chunks_exact(d.max(1)).enumerate().take(n) {
+                    for (j, &v) in row.iter().enumerate() {
+                        x32[j * n + i] = v as f32;
+                    }
+                }
+                x32
             },
             x_rows,
             panels,
@@ -218,15 +233,14 @@ impl BruteData {
     /// [`both_err`]'s band of its smallest are re-checked in f64, query by
     /// query ([`reverse_panel`]). `None` outside the fused search's widths
     /// or without queries.
-    pub(crate) fn search_both(&self, queries: &DMatrix<f64>) -> Option<(Vec<usize>, Vec<usize>)> {
-        if self.panels.is_empty() || queries.nrows() == 0 {
+    pub(crate) fn search_both(&self, q_rows: &[f64]) -> Option<(Vec<usize>, Vec<usize>)> {
+        if self.panels.is_empty() || q_rows.is_empty() {
             return None;
         }
         let (nx, d) = (self.x_norm.len(), self.d);
         let np = nx.div_ceil(PANEL);
-        let q_rows = row_major(queries, None);
         let group = if wide_kernel() { WIDE_GROUP } else { GROUP };
-        let blocks = self.fused_blocks(&q_rows, true);
+        let blocks = self.fused_blocks(q_rows, true);
         let q_norm_max = q_rows
             .chunks_exact(d)
             .map(|r| r.iter().map(|v| v * v).sum::<f64>())
@@ -243,7 +257,7 @@ impl BruteData {
             group,
             x_rows: &self.x_rows,
             x_norm: &self.x_norm,
-            q_rows: &q_rows,
+            q_rows,
             q_norm_max,
             d,
         };

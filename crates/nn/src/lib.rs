@@ -404,18 +404,33 @@ pub fn nearest_rows_both(
         );
         return Ok((ab?, ba?));
     }
-    check_finite(b, "data")?;
-    check_finite(a, "query")?;
-    let (x, q) = (owned(b), owned(a));
-    let scaled = power_of_two_scale(&x, &q).map(|s| (&x * s, &q * s));
-    let (x, q) = match &scaled {
-        Some((x, q)) => (x, q),
-        None => (&x, &q),
+    // Row by row from the views (read in place where rows are
+    // contiguous): the finiteness check and the scale in one pass per
+    // side, then one row-major copy each (rescaled when needed).
+    let (xr, qr) = (Rows::of(b), Rows::of(a));
+    let (Some(mx), Some(mq)) = (xr.max_abs_finite(), qr.max_abs_finite()) else {
+        check_finite(b, "data")?;
+        check_finite(a, "query")?;
+        // (Not reached: a pass that sees a coordinate that is not finite
+        // means one of the checks above names it.)
+        return Err(Error::NonFinite {
+            side: "data",
+            row: 0,
+            col: 0,
+            value: f64::NAN,
+        });
     };
-    match BruteData::new(x).search_both(q) {
+    let scale = scale_for(mx.max(mq));
+    let (x_rows, q_rows) = (xr.gather(None, scale), qr.gather(None, scale));
+    let data = BruteData::from_rows(x_rows, d);
+    match data.search_both(&q_rows) {
         Some(found) => Ok(found),
         None => {
-            let (ab, ba) = rayon::join(|| brute_search(x, q), || brute_search(q, x));
+            let (x, q) = (
+                DMatrix::from_row_slice(b.nrows(), d, data.rows()),
+                DMatrix::from_row_slice(a.nrows(), d, &q_rows),
+            );
+            let (ab, ba) = rayon::join(|| brute_search(&x, &q), || brute_search(&q, &x));
             Ok((ab, ba))
         }
     }

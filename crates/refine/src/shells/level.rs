@@ -3,7 +3,7 @@
 //! normals it reads: [`super::posed`]; the ARAP rotations:
 //! [`super::arap`]).
 
-use faer::{Mat, MatRef};
+use faer::MatRef;
 use fmaps_nn::{NnParams, nearest_rows, nearest_rows_both};
 use nalgebra::{DMatrix, Matrix3, Vector3};
 
@@ -240,23 +240,46 @@ pub(crate) struct FeatureMap {
     pub weights: Vec<f64>,
 }
 
-/// Rows `[p, fn · n, ff · F]` of the product embedding (a row per
-/// sample).
-fn embed(p: &AtSamples, fn_: f64, feat: Option<(&DMatrix<f64>, f64)>) -> Mat<f64> {
+/// A product embedding: rows `[p, fn · n, ff · F]`, a row per sample,
+/// row-major (the searches read the rows in place).
+struct Embedding {
+    rows: Vec<f64>,
+    n: usize,
+    cols: usize,
+}
+
+impl Embedding {
+    fn view(&self) -> MatRef<'_, f64> {
+        MatRef::from_row_major_slice(&self.rows, self.n, self.cols)
+    }
+}
+
+/// The product embedding of `p` (normals scaled by `fn_`, features `F`
+/// by `ff`).
+fn embed(p: &AtSamples, fn_: f64, feat: Option<(&DMatrix<f64>, f64)>) -> Embedding {
     let kf = feat.map_or(0, |(f, _)| f.ncols());
     // Normals at weight 0 are left out (their columns would be 0).
     let kn = if fn_ == 0.0 { 0 } else { 3 };
     let (pts, nrm) = (&p.pts, &p.nrm);
-    Mat::from_fn(pts.len(), 3 + kn + kf, |r, c| {
-        if c < 3 {
-            pts[r][c]
-        } else if c < 3 + kn {
-            fn_ * nrm[r][c - 3]
-        } else {
-            let (f, s) = feat.expect("features");
-            s * f[(r, c - 3 - kn)]
+    let (n, cols) = (pts.len(), 3 + kn + kf);
+    let mut rows = vec![0.0; n * cols];
+    for (r, row) in rows.chunks_exact_mut(cols).enumerate() {
+        row[..3].copy_from_slice(&pts[r]);
+        if kn > 0 {
+            for c in 0..3 {
+                row[3 + c] = fn_ * nrm[r][c];
+            }
         }
-    })
+    }
+    if let Some((f, s)) = feat {
+        // Feature column by column (F is column-major).
+        for c in 0..kf {
+            for (r, &v) in f.column(c).iter().enumerate() {
+                rows[r * cols + 3 + kn + c] = s * v;
+            }
+        }
+    }
+    Embedding { rows, n, cols }
 }
 
 fn frob(p: &[[f64; 3]]) -> f64 {
@@ -380,16 +403,16 @@ pub(crate) fn correspondences(
     // The strategy of each direction (data `d`, queries `q`), then the
     // search with it.
     fn plan<'h>(
-        d: &Mat<f64>,
-        q: &Mat<f64>,
+        d: &Embedding,
+        q: &Embedding,
         cells: Option<&[u32]>,
         hint: Option<&'h [usize]>,
     ) -> (NnParams, Option<&'h [usize]>) {
-        let hint = hint.filter(|h| h.len() == q.nrows());
-        (search_params(d.as_ref(), cells, hint.is_some()), hint)
+        let hint = hint.filter(|h| h.len() == q.n);
+        (search_params(d.view(), cells, hint.is_some()), hint)
     }
-    let search = |d: &Mat<f64>, q: &Mat<f64>, (params, hint): (NnParams, Option<&[usize]>)| {
-        nearest_rows(d.as_ref(), q.as_ref(), hint, &params).map_err(fmaps_solve::Error::Search)
+    let search = |d: &Embedding, q: &Embedding, (params, hint): (NnParams, Option<&[usize]>)| {
+        nearest_rows(d.view(), q.view(), hint, &params).map_err(fmaps_solve::Error::Search)
     };
     let (hab, hba) = (hints.map(|h| h.0.as_slice()), hints.map(|h| h.1.as_slice()));
     let pba = plan(&ex, &ey, sx.cells.as_deref(), hba);
@@ -400,7 +423,7 @@ pub(crate) fn correspondences(
         if pab.0.strategy == brute && pba.0.strategy == brute {
             // Both ways from one pass of products (the same answers).
             let (ab, ba) =
-                nearest_rows_both(ex.as_ref(), ey.as_ref()).map_err(fmaps_solve::Error::Search)?;
+                nearest_rows_both(ex.view(), ey.view()).map_err(fmaps_solve::Error::Search)?;
             (Ok(ab), Ok(ba))
         } else {
             rayon::join(|| search(&ey, &ex, pab), || search(&ex, &ey, pba))
@@ -659,6 +682,7 @@ pub(crate) fn alignment_energy(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use faer::Mat;
 
     #[test]
     fn shell_weights_are_a_sigmoid_cut_at_k() {
