@@ -10,6 +10,9 @@ use fmaps_nn::{NnParams, NnStrategy};
 use fmaps_solve::convert::{BasisRows, Conversion, point_map, point_map_sinkhorn, pullback};
 use fmaps_solve::sinkhorn::Sinkhorn;
 
+/// Lloyd steps of ICP's clusters ([`fmaps_nn::Partition::for_balls_with_steps`]).
+const ICP_KMEANS_STEPS: usize = 2;
+
 /// ICP in the spectral domain: alternate `T_BA = NN(C)` and
 /// `C ← U Vᵀ` for the SVD `U Σ Vᵀ` of `Φ_Bᵀ M_B Π_BA Φ_A`, at the input's
 /// size. The defaults are pyFM's `icp_refine` (10 iterations, direct
@@ -104,9 +107,10 @@ impl Icp {
         // to 48 dimensions).
         let dim = if self.adjoint { ka } else { kb };
         // Without tiles, in more than 32 dimensions: the clusters of A's
-        // rows (the data of every search) and the ball search.
+        // rows (the data of every search) and the ball search. Two Lloyd
+        // steps: ten searches at one size do not repay five (docs/tuning.md).
         let partition = if dim > 32 && self.sinkhorn.is_none() {
-            crate::zoomout::balls_partition(phi_a)
+            crate::zoomout::balls_partition_steps(phi_a, ICP_KMEANS_STEPS)
         } else {
             None
         };

@@ -580,3 +580,11 @@ const BALLS_MIN_ROWS: usize = 1024;
 pub(crate) fn balls_partition(r: &BasisRows) -> Option<std::sync::Arc<fmaps_nn::Partition>> {
     fmaps_nn::Partition::for_balls(r.view(r.k()), BALLS_MIN_ROWS)
 }
+
+/// [`balls_partition`] with `steps` Lloyd steps (ICP's).
+pub(crate) fn balls_partition_steps(
+    r: &BasisRows,
+    steps: usize,
+) -> Option<std::sync::Arc<fmaps_nn::Partition>> {
+    fmaps_nn::Partition::for_balls_with_steps(r.view(r.k()), BALLS_MIN_ROWS, steps)
+}
