@@ -207,13 +207,8 @@ impl BallData {
             .par_iter()
             .map(|&q0| {
                 let len = SUPER_BLOCK.min(nq - q0);
-                let f = scale.unwrap_or(1.0);
-                let mut q64 = vec![0.0; len * d];
-                for (t, row) in q64.chunks_exact_mut(d).enumerate() {
-                    row.iter_mut()
-                        .zip(queries.row(q0 + t))
-                        .for_each(|(o, &v)| *o = v * f);
-                }
+                let chunk: Vec<usize> = (q0..q0 + len).collect();
+                let q64 = queries.gather(Some(&chunk), scale);
                 let q32: Vec<f32> = q64.iter().map(|&v| v as f32).collect();
                 let mut g = vec![0.0f32; m * len];
                 matmul(

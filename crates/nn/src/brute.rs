@@ -71,16 +71,17 @@ pub(crate) struct BruteData {
 
 impl BruteData {
     pub(crate) fn new(data: &DMatrix<f64>) -> BruteData {
-        BruteData::from_rows(row_major(data, None), data.ncols())
-    }
-
-    /// The data rows (row-major).
-    pub(crate) fn rows(&self) -> &[f64] {
-        &self.x_rows
+        BruteData::build(row_major(data, None), data.ncols(), Some(data.as_slice()))
     }
 
     /// [`BruteData::new`] of the rows `x_rows` (row-major, `d` wide).
     pub(crate) fn from_rows(x_rows: Vec<f64>, d: usize) -> BruteData {
+        BruteData::build(x_rows, d, None)
+    }
+
+    /// The data side of the rows `x_rows` (row-major, `d` wide), given
+    /// them column-major too where the caller has them (`col_major`).
+    fn build(x_rows: Vec<f64>, d: usize, col_major: Option<&[f64]>) -> BruteData {
         let x_norm: Vec<f64> = x_rows
             .chunks(d.max(1))
             .map(|r| r.iter().map(|v| v * v).sum())
@@ -109,13 +110,18 @@ impl BruteData {
                 Vec::new()
             } else {
                 // Column-major.
-                let mut x32 = vec![0.0f32; n * d];
-                for (i, row) in x_rows.chunks_exact(d.max(1)).enumerate().take(n) {
-                    for (j, &v) in row.iter().enumerate() {
-                        x32[j * n + i] = v as f32;
+                match col_major {
+                    Some(c) => c.iter().map(|&v| v as f32).collect(),
+                    None => {
+                        let mut x32 = vec![0.0f32; n * d];
+                        for (i, row) in x_rows.chunks_exact(d.max(1)).enumerate().take(n) {
+                            for (j, &v) in row.iter().enumerate() {
+                                x32[j * n + i] = v as f32;
+                            }
+                        }
+                        x32
                     }
                 }
-                x32
             },
             x_rows,
             panels,

@@ -395,45 +395,30 @@ pub fn nearest_rows_both(
     a: MatRef<'_, f64>,
     b: MatRef<'_, f64>,
 ) -> Result<(Vec<usize>, Vec<usize>)> {
-    let brute = NnParams::with_strategy(NnStrategy::Brute);
     let d = b.ncols();
-    if a.ncols() != d || a.nrows() == 0 || b.nrows() == 0 || !(1..=FUSED_MAX_DIM).contains(&d) {
-        let (ab, ba) = rayon::join(
-            || nearest_rows(b, a, None, &brute),
-            || nearest_rows(a, b, None, &brute),
-        );
-        return Ok((ab?, ba?));
-    }
-    // Row by row from the views (read in place where rows are
-    // contiguous): the finiteness check and the scale in one pass per
-    // side, then one row-major copy each (rescaled when needed).
-    let (xr, qr) = (Rows::of(b), Rows::of(a));
-    let (Some(mx), Some(mq)) = (xr.max_abs_finite(), qr.max_abs_finite()) else {
-        check_finite(b, "data")?;
-        check_finite(a, "query")?;
-        // (Not reached: a pass that sees a coordinate that is not finite
-        // means one of the checks above names it.)
-        return Err(Error::NonFinite {
-            side: "data",
-            row: 0,
-            col: 0,
-            value: f64::NAN,
-        });
-    };
-    let scale = scale_for(mx.max(mq));
-    let (x_rows, q_rows) = (xr.gather(None, scale), qr.gather(None, scale));
-    let data = BruteData::from_rows(x_rows, d);
-    match data.search_both(&q_rows) {
-        Some(found) => Ok(found),
-        None => {
-            let (x, q) = (
-                DMatrix::from_row_slice(b.nrows(), d, data.rows()),
-                DMatrix::from_row_slice(a.nrows(), d, &q_rows),
-            );
-            let (ab, ba) = rayon::join(|| brute_search(&x, &q), || brute_search(&q, &x));
-            Ok((ab, ba))
+    if a.ncols() == d && a.nrows() > 0 && b.nrows() > 0 && (1..=FUSED_MAX_DIM).contains(&d) {
+        // Row by row from the views (read in place where rows are
+        // contiguous): the finiteness check and the scale in one pass per
+        // side, then one row-major copy each (rescaled when needed).
+        let (xr, qr) = (Rows::of(b), Rows::of(a));
+        if let (Some(mx), Some(mq)) = (xr.max_abs_finite(), qr.max_abs_finite()) {
+            let scale = scale_for(mx.max(mq));
+            let q_rows = qr.gather(None, scale);
+            if let Some(found) =
+                BruteData::from_rows(xr.gather(None, scale), d).search_both(&q_rows)
+            {
+                return Ok(found);
+            }
         }
     }
+    // Other widths, empty sides, or a coordinate that is not finite (the
+    // searches name it): two searches.
+    let brute = NnParams::with_strategy(NnStrategy::Brute);
+    let (ab, ba) = rayon::join(
+        || nearest_rows(b, a, None, &brute),
+        || nearest_rows(a, b, None, &brute),
+    );
+    Ok((ab?, ba?))
 }
 
 /// Checks the queries and guesses against `nx` data rows of `d`
