@@ -214,7 +214,8 @@ pub struct NnParams {
     /// shape's spectral embedding, and reused for every linear image of it
     /// that is searched (ZoomOut's `Φ_A Cᵀ`). With a partition,
     /// [`NnStrategy::Auto`] runs the balls where the CPU has no matrix
-    /// tiles and guesses are given.
+    /// tiles (with or without guesses: without, each query is first
+    /// seeded from its nearest centre's ball).
     pub partition: Option<Arc<Partition>>,
 }
 
@@ -576,7 +577,7 @@ impl Searcher {
 /// follows measurements on FAUST spectral embeddings (README, "Choosing a
 /// strategy"): the tiles wherever they exist, the prefix search with
 /// guesses in high dimensions, the clusters instead where a partition is
-/// given (more than 32 coordinates: below, the fused kernel), the tree
+/// given, with or without guesses (more than 32 coordinates: below, the fused kernel), the tree
 /// only for very large sets in 33-48 dimensions (below 33 the fused
 /// brute-force kernel is faster at every size measured, up to 80k x 80k
 /// rows).
@@ -593,7 +594,7 @@ fn resolve(
     }
     if d >= TILES_FROM && tiles::available() {
         NnStrategy::Tiles
-    } else if partitioned && hinted && d > FUSED_MAX_DIM {
+    } else if partitioned && d > FUSED_MAX_DIM {
         NnStrategy::Balls
     } else if (1024..=PREFIX_MAX_ROWS).contains(&nx) && d >= PREFIX_FROM && hinted {
         NnStrategy::Prefix

@@ -445,10 +445,13 @@ fn border(
                 *acc += m * v;
             }
         }
+        // (Transposed: A's columns against p's. A product `db` rows high
+        // fills a fraction of the GEMM's micro-kernel.)
         inner(
-            MatRef::from_row_major_slice(&p, phi_a.n(), db),
             phi_a.view(kap),
+            MatRef::from_row_major_slice(&p, phi_a.n(), db),
         )
+        .transpose()
     });
     (DMatrix::from_column_slice(kb, dn, &cols), rows)
 }
