@@ -314,9 +314,8 @@ impl BallData {
         let centers = MatRef::from_row_major_slice(&self.centers32, m, d);
         let found: Vec<Vec<usize>> = supers
             .par_iter()
-            .map_init(
-                || BallWork::new(m),
-                |work, range| {
+            .map(|range| {
+                BallWork::with(m, |work| {
                     let s0 = blocks[range.start].0;
                     let last = blocks[range.end - 1];
                     let slen = last.0 + last.1 - s0;
@@ -349,8 +348,8 @@ impl BallData {
                     }
                     work.g = g;
                     out
-                },
-            )
+                })
+            })
             .collect();
         let mut out = vec![0; nq];
         for (&q, x) in qorder.iter().zip(found.into_iter().flatten()) {
@@ -393,7 +392,32 @@ struct BallWork {
     row_lb: Vec<f64>,
 }
 
+thread_local! {
+    /// This thread's [`BallWork`], kept from search to search: its
+    /// buffers (the centre products of a super-block, ~0.5 MB at 5k rows)
+    /// are then allocated and zeroed once, not per super-block.
+    static WORK: std::cell::RefCell<Option<BallWork>> = const { std::cell::RefCell::new(None) };
+}
+
 impl BallWork {
+    /// `f` with this thread's buffers for `m` balls (fresh ones if they
+    /// are in use further up this thread's stack).
+    fn with<R>(m: usize, f: impl FnOnce(&mut BallWork) -> R) -> R {
+        WORK.with(|cell| match cell.try_borrow_mut() {
+            Ok(mut kept) => {
+                let work = kept.get_or_insert_with(|| BallWork::new(m));
+                if work.pass.len() != m {
+                    // Per-ball buffers for another partition (every slot
+                    // is u32::MAX between blocks).
+                    work.pass = vec![0.0; m];
+                    work.slot = vec![u32::MAX; m];
+                }
+                f(work)
+            }
+            Err(_) => f(&mut BallWork::new(m)),
+        })
+    }
+
     fn new(m: usize) -> BallWork {
         BallWork {
             g: Vec::new(),
@@ -543,7 +567,8 @@ crate::cpu::dispatched! {
         }
         let n_cand = work.cands.len();
         if work.tq.nrows() < n_cand * TANGENT || work.tq.ncols() < len {
-            work.tq = Mat::zeros(n_cand * TANGENT, QUERY_BLOCK);
+            // (Room for every ball: allocated once, not regrown.)
+            work.tq = Mat::zeros(m.max(n_cand) * TANGENT, QUERY_BLOCK);
         }
         matmul(
             work.tq.as_mut().submatrix_mut(0, 0, n_cand * TANGENT, len),
