@@ -7,7 +7,9 @@ use nalgebra::DMatrix;
 
 use crate::{Error, Iteration, RefineReport, Refined, Refiner, Result, check_k, count_changed};
 use fmaps_nn::{NnParams, NnStrategy};
-use fmaps_solve::convert::{BasisRows, Conversion, point_map, point_map_sinkhorn, pullback};
+use fmaps_solve::convert::{
+    BasisRows, Conversion, point_map, point_map_sinkhorn, pullback, pullback_update,
+};
 use fmaps_solve::sinkhorn::Sinkhorn;
 
 /// Lloyd steps of ICP's clusters ([`fmaps_nn::Partition::for_balls_with_steps`]).
@@ -140,9 +142,19 @@ impl Icp {
         let mut c = c_ab.clone();
         let guess = guess.filter(|g| g.len() == basis_b.n());
         let mut t_ba = nn(&c, guess, &mut report)?;
+        // The last pull-back and its map: the next one sums only the rows
+        // of B whose image changed.
+        let mut last: Option<(DMatrix<f64>, Vec<usize>)> = None;
         for _ in 0..self.max_iterations {
             let ti = Instant::now();
-            c = nearest_orthonormal(pullback(&t_ba, phi_a, ka, phi_b, kb, mass_b)?);
+            let pulled = match &last {
+                Some((p, t_prev)) => {
+                    pullback_update(p, t_prev, &t_ba, phi_a, ka, phi_b, kb, mass_b)?
+                }
+                None => pullback(&t_ba, phi_a, ka, phi_b, kb, mass_b)?,
+            };
+            c = nearest_orthonormal(pulled.clone());
+            last = Some((pulled, t_ba.clone()));
             let next = nn(&c, Some(&t_ba), &mut report)?;
             let changed = count_changed(Some(&t_ba), &next);
             t_ba = next;
