@@ -272,10 +272,14 @@ fn embed(p: &AtSamples, fn_: f64, feat: Option<(&DMatrix<f64>, f64)>) -> Embeddi
         }
     }
     if let Some((f, s)) = feat {
-        // Feature column by column (F is column-major).
-        for c in 0..kf {
-            for (r, &v) in f.column(c).iter().enumerate() {
-                rows[r * cols + 3 + kn + c] = s * v;
+        // Feature column by column (F is column-major: one slice per
+        // column, no iterator adapters in the loop).
+        debug_assert_eq!(f.nrows(), n);
+        if n > 0 {
+            for (c, col) in f.as_slice().chunks_exact(n).enumerate() {
+                for (r, &v) in col.iter().enumerate() {
+                    rows[r * cols + 3 + kn + c] = s * v;
+                }
             }
         }
     }
@@ -513,27 +517,37 @@ pub(crate) fn level(
             res[(xi, d)] += ys.pts[sy[yi]][d] - xs[sx[xi]][d];
         }
     }
-    let mut partners = DMatrix::<f64>::zeros(sx.len(), kk);
-    for c in 0..kk {
-        let (from, to) = (sy.phi.column(c), &mut partners.column_mut(c));
-        for &(xi, yi) in &pairs {
-            to[xi] += sx.sqrt_mass[xi] * from[yi];
+    // (Column by column on the column-major storage: slices, not
+    // nalgebra's strided views, in the hot loop; the same sums in the
+    // same order.)
+    let (nx, ny) = (sx.phi.nrows(), sy.phi.nrows());
+    let mut partners = DMatrix::<f64>::zeros(nx, kk);
+    if nx > 0 && ny > 0 {
+        for (to, from) in partners
+            .as_mut_slice()
+            .chunks_exact_mut(nx)
+            .zip(sy.phi.as_slice().chunks_exact(ny))
+        {
+            for &(xi, yi) in &pairs {
+                to[xi] += sx.sqrt_mass[xi] * from[yi];
+            }
         }
     }
     let a = view(&sx.phi, kd);
     // The samples' first `cols` columns of Φ, row r scaled by w[r] (the
-    // same products as element by element; column by column, no call per
-    // element).
+    // same products as element by element; column by column on the
+    // column-major slices, which vectorises).
     let weighted = |w: &[f64], cols: usize| {
-        let mut out = DMatrix::<f64>::zeros(sx.len(), cols);
-        for c in 0..cols {
-            for ((o, &p), &wr) in out
-                .column_mut(c)
-                .iter_mut()
-                .zip(sx.phi.column(c).iter())
-                .zip(w)
+        let mut out = DMatrix::<f64>::zeros(nx, cols);
+        if nx > 0 {
+            for (o, p) in out
+                .as_mut_slice()
+                .chunks_exact_mut(nx)
+                .zip(sx.phi.as_slice().chunks_exact(nx))
             {
-                *o = wr * p;
+                for ((o, &p), &wr) in o.iter_mut().zip(p).zip(w) {
+                    *o = wr * p;
+                }
             }
         }
         out
