@@ -154,10 +154,10 @@ impl Icp {
                 None => pullback(&t_ba, phi_a, ka, phi_b, kb, mass_b)?,
             };
             c = nearest_orthonormal(pulled.clone());
-            last = Some((pulled, t_ba.clone()));
             let next = nn(&c, Some(&t_ba), &mut report)?;
             let changed = count_changed(Some(&t_ba), &next);
-            t_ba = next;
+            // (The map just searched from becomes the last pull-back's.)
+            last = Some((pulled, std::mem::replace(&mut t_ba, next)));
             report.iterations.push(Iteration {
                 k: (ka, kb),
                 changed,
