@@ -47,7 +47,7 @@ use faer::{Accum, Mat, MatRef, Par};
 use nalgebra::DMatrix;
 use rayon::prelude::*;
 
-use crate::brute::score_err;
+use crate::brute::{scale_for, score_err};
 pub use crate::partition::Partition;
 use crate::rows::{Rows, dist2, dist2_below, dot8 as dot};
 
@@ -152,6 +152,41 @@ impl BallData {
         };
         let (order, ranges) = partition.groups();
         let x_ord = data.gather(Some(&order), scale);
+        BallData::assemble(d, x_ord, order, ranges)
+    }
+
+    /// [`BallData::from_rows`] of the clusters of `partition` (which labels
+    /// every row), checked and scaled on the way: `None` when a coordinate
+    /// is not finite; else the balls and the scale of the data with
+    /// queries of largest magnitude `q_max` (`scale_for`). The rows are
+    /// read once (the copy in the clusters' order is also the scan).
+    pub(crate) fn from_rows_checked(
+        data: &Rows<'_>,
+        partition: &Partition,
+        q_max: f64,
+    ) -> Option<(BallData, Option<f64>)> {
+        let d = data.shape().1;
+        let (order, ranges) = partition.groups();
+        let (mut x_ord, x_max) = data.gather_max_abs(&order);
+        let scale = scale_for(x_max?.max(q_max));
+        if let Some(s) = scale {
+            // (A power of two: the same values as scaling on the copy.)
+            for v in &mut x_ord {
+                *v *= s;
+            }
+        }
+        Some((BallData::assemble(d, x_ord, order, ranges), scale))
+    }
+
+    /// The balls of `x_ord` (`d` columns), the data rows in the clusters'
+    /// order `order`, cluster `b` at `ranges[b]` (start, length).
+    fn assemble(
+        d: usize,
+        x_ord: Vec<f64>,
+        order: Vec<usize>,
+        ranges: Vec<(usize, usize)>,
+    ) -> BallData {
+        let nx = order.len();
         let mut pos_of = vec![0u32; nx];
         for (p, &i) in order.iter().enumerate() {
             pos_of[i] = p as u32;
@@ -265,10 +300,10 @@ impl BallData {
             Some(g) if g < nx => self.ball_of[g],
             _ => u32::MAX,
         };
-        let mut qorder: Vec<usize> = (0..nq).collect();
-        if hint.is_some() {
-            qorder.sort_by_key(|&q| (cluster(q), q));
-        }
+        let qorder: Vec<usize> = match hint {
+            Some(_) => order_by_key(nq, self.ranges.len(), cluster),
+            None => (0..nq).collect(),
+        };
         // The queries' f64 rows read in place (through `qorder`), or
         // gathered in that order when they must be scaled; in f32 for the
         // GEMMs, in that order.
@@ -371,6 +406,8 @@ struct BallWork {
     /// `p_start[i]` to `p_start[i + 1]`).
     p_list: Vec<u32>,
     p_start: Vec<usize>,
+    /// The balls one query keeps after the tangent filter.
+    keep: Vec<u32>,
     /// Per ball: its slot among the block's candidate balls (or `u32::MAX`),
     /// and the candidates (to reset their slots).
     slot: Vec<u32>,
@@ -411,6 +448,7 @@ impl BallWork {
                     // is u32::MAX between blocks).
                     work.pass = vec![0.0; m];
                     work.slot = vec![u32::MAX; m];
+                    work.keep = vec![0; m];
                 }
                 f(work)
             }
@@ -424,6 +462,7 @@ impl BallWork {
             pass: vec![0.0; m],
             p_list: Vec::new(),
             p_start: Vec::with_capacity(QUERY_BLOCK + 1),
+            keep: vec![0; m],
             cands: Vec::new(),
             slot: vec![u32::MAX; m],
             ut: Vec::new(),
@@ -572,8 +611,33 @@ crate::cpu::dispatched! {
             let tcol = &work.tq.col_as_slice(i)[..n_cand * TANGENT];
             work.visit.clear();
             work.tangents.clear();
-            for pi in work.p_start[i]..work.p_start[i + 1] {
-                let j = work.p_list[pi] as usize;
+            // The balls that may pass the tangent bound: all that passed the
+            // plain one, or those the AVX-512 filter keeps (a superset of
+            // those the bound below keeps).
+            let passed = work.p_start[i]..work.p_start[i + 1];
+            #[cfg(target_arch = "x86_64")]
+            let kept = if v4 {
+                let q = BoundQuery {
+                    qn,
+                    q_norm,
+                    q_err: work.q_err[i],
+                    t_err: work.t_err[i],
+                    sl,
+                };
+                let keep = &mut work.keep[..passed.len()];
+                // SAFETY: x86-64-v4 (checked above); the passing balls are
+                // below m (`slot`, `g`), their slots within `tcol`.
+                let n = unsafe {
+                    tangent_filter_avx512(this, &work.p_list[passed.clone()], &work.slot, tcol, g, q, best.0, keep)
+                };
+                &work.keep[..n]
+            } else {
+                &work.p_list[passed]
+            };
+            #[cfg(not(target_arch = "x86_64"))]
+            let kept = &work.p_list[passed];
+            for &j in kept {
+                let j = j as usize;
                 let s = work.slot[j] as usize;
                 let mut uq = [0.0; TANGENT];
                 for t in 0..TANGENT {
@@ -645,6 +709,26 @@ crate::cpu::dispatched! {
     }
 }
 
+/// `0..n` sorted by `(key(i), i)`, for keys below `m` or `u32::MAX`
+/// (last): a counting sort.
+fn order_by_key(n: usize, m: usize, key: impl Fn(usize) -> u32) -> Vec<usize> {
+    let bucket = |i: usize| (key(i) as usize).min(m);
+    let mut start = vec![0usize; m + 2];
+    for i in 0..n {
+        start[bucket(i) + 1] += 1;
+    }
+    for b in 0..=m {
+        start[b + 1] += start[b];
+    }
+    let mut order = vec![0usize; n];
+    for i in 0..n {
+        let b = bucket(i);
+        order[start[b]] = i;
+        start[b] += 1;
+    }
+    order
+}
+
 /// `visit` by bound, then ball: an insertion sort for the few balls a
 /// query usually visits (no call, no comparator), the library's sort for
 /// more.
@@ -663,97 +747,15 @@ fn sort_visits(visit: &mut [(f64, u32, u32)]) {
     }
 }
 
-/// A lower bound on the squared distance from `q` to every row of ball
-/// `j`, from its tangent box: with `v = q − c`, `t = Uv` and `P` the
-/// orthogonal projector onto the directions' span, `|q − x|² = |P(v −
-/// e)|² + |P⊥(v − e)|² ≥ |t − a|² / (1 + η) + (|P⊥v| − r⊥)₊²` for every
-/// row `x = c + e` (coordinates `a = Ue` inside the box, `|P⊥e| ≤ r⊥`),
-/// and `|P⊥v|² ≥ |v|² − |t|² / (1 − η)`; also the plain `(|v| − r)₊²`.
-/// `|v|²` comes from `|q|² + |c|² − 2 q·c` (`qc` = q·c) and `t` from `Uq
-/// − Uc` (`uq` = Uq), each moved the safe way by the slack `sl` relative
-/// to the norms involved.
-///
-/// `None` when the box part alone, `|t − a|²(1 − η)`, already puts the
-/// ball beyond `cutoff` (the rest of the bound, which needs the square
-/// roots, is then not computed): the whole bound is at least that part,
-/// in floating point too (the same rounded terms, then a sum of
-/// non-negative terms, a max and the same factor: all monotone).
-/// `q_norm`: `|q|` (`√qn`).
-#[allow(clippy::too_many_arguments)]
-#[inline(always)]
-fn tangent_bound(
-    this: &BallData,
-    j: usize,
-    (qn, q_norm): (f64, f64),
-    qc: f64,
-    uq: &[f64],
-    err: Err32,
-    sl: f64,
-    cutoff: f64,
-) -> Option<Tangent> {
-    let eps = sl * (q_norm + this.c_len[j]) + err.uq + f64::MIN_POSITIVE;
-    let (lo, hi) = (
-        &this.geo.box_lo[j * TANGENT..(j + 1) * TANGENT],
-        &this.geo.box_hi[j * TANGENT..(j + 1) * TANGENT],
-    );
-    let uc = &this.geo.uc[j * TANGENT..(j + 1) * TANGENT];
-    let (mut gap2, mut t2) = (0.0, 0.0);
-    let mut t = [0.0; TANGENT];
-    for i in 0..TANGENT {
-        let ti = uq[i] - uc[i];
-        t[i] = ti;
-        t2 += ti * ti;
-        let g = ((lo[i] - ti).max(ti - hi[i]) - eps).max(0.0);
-        gap2 += g * g;
-    }
-    let eta = this.geo.eta;
-    if gap2 * (1.0 - eta) * (1.0 - 2.0 * sl) > cutoff {
-        return None;
-    }
-    let s = qn + this.c_norm[j];
-    let v2_lo = (s - 2.0 * qc - sl * s - err.qc).max(0.0);
-    let v2_hi = (s - 2.0 * qc + sl * s + err.qc).max(0.0);
-    let dc_lo = v2_lo.sqrt() * (1.0 - sl);
-    let dc_hi = v2_hi.sqrt() * (1.0 + sl);
-    let tn = t2.sqrt() + 2.0 * eps;
-    let perp = (v2_lo - tn * tn * (1.0 + 2.0 * eta)).max(0.0).sqrt() * (1.0 - sl);
-    let pb = (perp - this.geo.r_perp[j]).max(0.0);
-    let plain = (dc_lo - this.geo.radii[j]).max(0.0);
-    Some(Tangent {
-        lb2: (gap2 * (1.0 - eta) + pb * pb).max(plain * plain) * (1.0 - 2.0 * sl),
-        t,
-        eps,
-        perp,
-        dc_lo,
-        dc_hi,
-    })
-}
-
-/// Bounds on the errors of [`tangent_bound`]'s inputs computed in f32:
-/// `2 q·c` (`qc`) and each `u·q` (`uq`).
-#[derive(Clone, Copy)]
-struct Err32 {
-    qc: f64,
-    uq: f64,
-}
-
-/// [`tangent_bound`]'s results: the ball's bound, the query's
-/// coordinates `t` along its directions (each within `eps` of the exact
-/// ones) and a lower bound `perp` on its distance to their span.
-#[derive(Clone, Copy)]
-struct Tangent {
-    lb2: f64,
-    t: [f64; TANGENT],
-    eps: f64,
-    perp: f64,
-    /// Bounds on |q − c|.
-    dc_lo: f64,
-    dc_hi: f64,
-}
-
 #[path = "balls_geometry.rs"]
 mod geometry;
 use geometry::{Geometry, geometry};
+
+#[path = "balls_bound.rs"]
+mod bound;
+#[cfg(target_arch = "x86_64")]
+use bound::{BoundQuery, tangent_filter_avx512};
+use bound::{Err32, Tangent, tangent_bound};
 
 #[path = "balls_plain.rs"]
 mod plain;

@@ -108,3 +108,22 @@ fn tangent_bound_is_tighter_than_the_ball() {
     }
     assert!(tangent * 2 < ball, "tangent {tangent}, ball {ball}");
 }
+
+/// The queries' order by their guesses' balls (a counting sort) is the
+/// order of a sort by (key, index), `u32::MAX` (no guess) last.
+#[test]
+fn order_by_key_is_the_sorted_order() {
+    for (n, m) in [(0, 3), (1, 1), (50, 1), (200, 7), (1000, 40)] {
+        let key = |i: usize| -> u32 {
+            let h = (i as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15) >> 40;
+            if h.is_multiple_of(5) {
+                u32::MAX
+            } else {
+                (h % m as u64) as u32
+            }
+        };
+        let mut want: Vec<usize> = (0..n).collect();
+        want.sort_by_key(|&i| (key(i), i));
+        assert_eq!(order_by_key(n, m, key), want, "n = {n}, m = {m}");
+    }
+}

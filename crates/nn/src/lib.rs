@@ -347,12 +347,26 @@ pub fn nearest_rows(
     if strategy == NnStrategy::Balls {
         // Row by row from the views (no column-major copies): the data in
         // its clusters' order, the queries in their guesses' order. The
-        // finiteness check and the scale in one pass per side.
+        // finiteness check and the scale in one pass per side (on the
+        // data, the same pass as its copy in the clusters' order).
         // (Otherwise the checks below name the first entry that is not.)
         let (x, q) = (Rows::of(data), Rows::of(queries));
-        if let (Some(mx), Some(mq)) = (x.max_abs_finite(), q.max_abs_finite()) {
-            let scale = scale_for(mx.max(mq));
-            return Ok(BallData::from_rows(&x, partition, scale).search_rows(&q, hint, scale));
+        if let Some(mq) = q.max_abs_finite() {
+            match partition {
+                Some(p) => {
+                    if let Some((balls, scale)) = BallData::from_rows_checked(&x, p, mq) {
+                        return Ok(balls.search_rows(&q, hint, scale));
+                    }
+                }
+                None => {
+                    if let Some(mx) = x.max_abs_finite() {
+                        let scale = scale_for(mx.max(mq));
+                        return Ok(
+                            BallData::from_rows(&x, None, scale).search_rows(&q, hint, scale)
+                        );
+                    }
+                }
+            }
         }
     }
     check_finite(data, "data")?;

@@ -93,6 +93,14 @@ impl<'a> Rows<'a> {
         out
     }
 
+    /// [`Rows::gather`] of the rows `order`, unscaled, with the largest
+    /// magnitude among them or `None` when a coordinate is not finite (as
+    /// [`Rows::max_abs_finite`] of those rows): one pass over the rows
+    /// for the copy, the finiteness check and the scale.
+    pub(crate) fn gather_max_abs(&self, order: &[usize]) -> (Vec<f64>, Option<f64>) {
+        gather_max_abs(self, order)
+    }
+
     /// The largest magnitude of the rows (0 when none), or `None` when a
     /// coordinate is not finite: one pass for the finiteness check and the
     /// scale. (`v · 0` is 0 for every finite `v` and NaN otherwise, and a
@@ -123,6 +131,36 @@ crate::cpu::dispatched! {
             }
             let finite = zero.iter().sum::<f64>() == 0.0;
             finite.then(|| lanes.into_iter().fold(0.0, f64::max))
+    }
+}
+
+crate::cpu::dispatched! {
+    /// [`Rows::gather_max_abs`].
+    fn gather_max_abs(rows: &Rows<'_>, order: &[usize]) -> (Vec<f64>, Option<f64>) {
+            let mut out = Vec::with_capacity(order.len() * rows.d);
+            let mut lanes = [0.0f64; 8];
+            let mut zero = [0.0f64; 8];
+            for p in 0..order.len() {
+                // A row a few ahead, from anywhere in the rows: requested now.
+                if let Some(&i) = order.get(p + 4) {
+                    fmaps_simd::prefetch(rows.row(i));
+                }
+                let r = rows.row(order[p]);
+                out.extend_from_slice(r);
+                let mut chunks = r.chunks_exact(8);
+                for c in &mut chunks {
+                    for ((l, z), v) in lanes.iter_mut().zip(&mut zero).zip(c) {
+                        *l = l.max(v.abs());
+                        *z += v * 0.0;
+                    }
+                }
+                for ((l, z), v) in lanes.iter_mut().zip(&mut zero).zip(chunks.remainder()) {
+                    *l = l.max(v.abs());
+                    *z += v * 0.0;
+                }
+            }
+            let finite = zero.iter().sum::<f64>() == 0.0;
+            (out, finite.then(|| lanes.into_iter().fold(0.0, f64::max)))
     }
 }
 
