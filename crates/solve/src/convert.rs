@@ -364,14 +364,13 @@ pub fn pullback_update(
     if !changed.is_empty() && kbp > 0 && kap > 0 {
         // Σ over changed y of m_y Φ_B(y)ᵀ (Φ_A(t(y)) − Φ_A(t_prev(y))).
         let nc = changed.len();
-        let mut d = vec![0.0; nc * kap];
-        let mut rows_b = vec![0.0; nc * kbp];
-        for (r, &y) in changed.iter().enumerate() {
+        // (Filled row by row: no zeroing first.)
+        let mut d = Vec::with_capacity(nc * kap);
+        let mut rows_b = Vec::with_capacity(nc * kbp);
+        for &y in &changed {
             let (new, old) = (phi_a.row(t_ba[y], kap), phi_a.row(t_prev[y], kap));
-            for ((x, &p), &q) in d[r * kap..(r + 1) * kap].iter_mut().zip(new).zip(old) {
-                *x = mass_b[y] * (p - q);
-            }
-            rows_b[r * kbp..(r + 1) * kbp].copy_from_slice(phi_b.row(y, kbp));
+            d.extend(new.iter().zip(old).map(|(&p, &q)| mass_b[y] * (p - q)));
+            rows_b.extend_from_slice(phi_b.row(y, kbp));
         }
         let delta = inner(
             MatRef::from_row_major_slice(&rows_b, nc, kbp),
