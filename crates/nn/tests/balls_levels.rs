@@ -7,7 +7,7 @@
 //! (`FMAPS_NO_AMX`) before its first search: one test in its own binary.
 
 use fmaps_eigensolve::conformance::grid_basis;
-use fmaps_nn::{NnParams, NnStrategy, Partition, SimdLevel, set_simd_cap, simd_level, view};
+use fmaps_nn::{NnParams, NnStrategy, Partition, view};
 use nalgebra::DMatrix;
 
 mod common;
@@ -15,7 +15,6 @@ use common::naive_nearest;
 
 #[test]
 fn partitioned_balls_give_the_naive_answer_at_every_level() {
-    use std::io::Write;
     // SAFETY: set before this process's first search, while this test is
     // its only thread (the variable is read once, on the first search).
     unsafe { std::env::set_var("FMAPS_NO_AMX", "1") };
@@ -34,17 +33,7 @@ fn partitioned_balls_give_the_naive_answer_at_every_level() {
         })
         .collect();
     let mut ran = Vec::new();
-    for level in SimdLevel::ALL {
-        if !level.detected() {
-            let _ = writeln!(
-                std::io::stderr(),
-                "note: {}: skipped, this CPU does not have it",
-                level.name()
-            );
-            continue;
-        }
-        set_simd_cap(Some(level));
-        assert_eq!(simd_level(), level);
+    fmaps_simd::at_every_level(|level| {
         for (x, q) in &sets {
             let (n, d) = x.shape();
             let want = naive_nearest(x, q);
@@ -59,8 +48,7 @@ fn partitioned_balls_give_the_naive_answer_at_every_level() {
             }
         }
         ran.push(level.name());
-    }
-    set_simd_cap(None);
-    let _ = writeln!(std::io::stderr(), "note: levels checked: {ran:?}");
+    });
+    eprintln!("note: levels checked: {ran:?}");
     assert!(ran.contains(&"baseline"));
 }
