@@ -113,24 +113,51 @@ impl<'a> Rows<'a> {
 crate::cpu::dispatched! {
     /// [`Rows::max_abs_finite`].
     fn max_abs_finite(rows: &Rows<'_>) -> Option<f64> {
-            let mut lanes = [0.0f64; 8];
-            let mut zero = [0.0f64; 8];
+            let mut m = MaxAbs::default();
             for i in 0..rows.n {
-                let r = rows.row(i);
-                let mut chunks = r.chunks_exact(8);
-                for c in &mut chunks {
-                    for ((l, z), v) in lanes.iter_mut().zip(&mut zero).zip(c) {
-                        *l = l.max(v.abs());
-                        *z += v * 0.0;
-                    }
-                }
-                for ((l, z), v) in lanes.iter_mut().zip(&mut zero).zip(chunks.remainder()) {
-                    *l = l.max(v.abs());
-                    *z += v * 0.0;
-                }
+                m.add(rows.row(i));
             }
-            let finite = zero.iter().sum::<f64>() == 0.0;
-            finite.then(|| lanes.into_iter().fold(0.0, f64::max))
+            m.result()
+    }
+}
+
+/// The running largest magnitude of rows, in eight lanes, and their
+/// finiteness (`v · 0` is 0 for every finite `v` and NaN otherwise, and a
+/// sum of zeros cannot overflow). Inline: inside a dispatched function it
+/// is compiled for that level.
+#[derive(Default)]
+struct MaxAbs {
+    lanes: [f64; 8],
+    zero: [f64; 8],
+}
+
+impl MaxAbs {
+    #[inline(always)]
+    fn add(&mut self, r: &[f64]) {
+        let mut chunks = r.chunks_exact(8);
+        for c in &mut chunks {
+            for ((l, z), v) in self.lanes.iter_mut().zip(&mut self.zero).zip(c) {
+                *l = l.max(v.abs());
+                *z += v * 0.0;
+            }
+        }
+        for ((l, z), v) in self
+            .lanes
+            .iter_mut()
+            .zip(&mut self.zero)
+            .zip(chunks.remainder())
+        {
+            *l = l.max(v.abs());
+            *z += v * 0.0;
+        }
+    }
+
+    /// The largest magnitude (0 when none), or `None` when a coordinate
+    /// was not finite.
+    #[inline(always)]
+    fn result(self) -> Option<f64> {
+        let finite = self.zero.iter().sum::<f64>() == 0.0;
+        finite.then(|| self.lanes.into_iter().fold(0.0, f64::max))
     }
 }
 
@@ -138,8 +165,7 @@ crate::cpu::dispatched! {
     /// [`Rows::gather_max_abs`].
     fn gather_max_abs(rows: &Rows<'_>, order: &[usize]) -> (Vec<f64>, Option<f64>) {
             let mut out = Vec::with_capacity(order.len() * rows.d);
-            let mut lanes = [0.0f64; 8];
-            let mut zero = [0.0f64; 8];
+            let mut m = MaxAbs::default();
             for p in 0..order.len() {
                 // A row a few ahead, from anywhere in the rows: requested now.
                 if let Some(&i) = order.get(p + 4) {
@@ -147,20 +173,9 @@ crate::cpu::dispatched! {
                 }
                 let r = rows.row(order[p]);
                 out.extend_from_slice(r);
-                let mut chunks = r.chunks_exact(8);
-                for c in &mut chunks {
-                    for ((l, z), v) in lanes.iter_mut().zip(&mut zero).zip(c) {
-                        *l = l.max(v.abs());
-                        *z += v * 0.0;
-                    }
-                }
-                for ((l, z), v) in lanes.iter_mut().zip(&mut zero).zip(chunks.remainder()) {
-                    *l = l.max(v.abs());
-                    *z += v * 0.0;
-                }
+                m.add(r);
             }
-            let finite = zero.iter().sum::<f64>() == 0.0;
-            (out, finite.then(|| lanes.into_iter().fold(0.0, f64::max)))
+            (out, m.result())
     }
 }
 
