@@ -180,7 +180,7 @@ impl BallData {
 
     /// The balls of `x_ord` (`d` columns), the data rows in the clusters'
     /// order `order`, cluster `b` at `ranges[b]` (start, length).
-    fn assemble(
+    pub(crate) fn assemble(
         d: usize,
         x_ord: Vec<f64>,
         order: Vec<usize>,
@@ -221,6 +221,12 @@ impl BallData {
             tangent32,
             c_err,
         }
+    }
+
+    /// The data rows in ball order (row-major), taken back (e.g. as a
+    /// buffer for the next image to search).
+    pub(crate) fn into_rows(self) -> Vec<f64> {
+        self.x_ord
     }
 
     /// The nearest data row of every query (same width as the data);

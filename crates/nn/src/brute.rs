@@ -340,7 +340,7 @@ pub(crate) fn score_err(d: usize, q_norm: f64, x_norm_max: f64) -> f64 {
 
 /// Largest magnitude [`power_of_two_scale`] leaves alone (2³⁰), and its
 /// reciprocal the smallest.
-const F32_COMFORT: f64 = 1_073_741_824.0;
+pub(crate) const F32_COMFORT: f64 = 1_073_741_824.0;
 
 /// A power of two that brings the largest finite coordinate magnitude of
 /// both sets into [1, 2) (at most 2¹⁰⁰⁰: subnormal ones stay below), when

@@ -71,6 +71,7 @@
 mod balls;
 mod brute;
 mod cpu;
+mod image;
 mod knn;
 mod partition;
 mod prefix;
@@ -104,6 +105,7 @@ use tree::{LEAF_DATA, LEAF_QUERY, TREE_MAX_DIM, TreeData, tree_search};
 const TREE_MIN_ROWS: usize = 50_000;
 
 pub use cpu::{CpuFeatures, SimdLevel, cpu_features, set_simd_cap, simd_level};
+pub use image::{CheckedRows, ImageSearch};
 pub use knn::{KNN_MARGIN, KNearest, k_nearest_rows};
 pub use wedge::{Fan, wedge_sums};
 
@@ -132,6 +134,16 @@ pub enum Error {
     NoData {
         /// Queries.
         queries: usize,
+    },
+    /// Two sizes that must agree do not.
+    #[error("{what}: {found}, expected {expected}")]
+    SizeMismatch {
+        /// What was compared.
+        what: &'static str,
+        /// The size found.
+        found: usize,
+        /// The size expected.
+        expected: usize,
     },
     /// A coordinate is NaN or infinite (no nearest row is defined).
     #[error("{side} row {row}, coordinate {col} is {value}: coordinates must be finite")]

@@ -6,7 +6,7 @@ use fmaps_eigensolve::SpectralBasis;
 use nalgebra::DMatrix;
 
 use crate::{Error, Iteration, RefineReport, Refined, Refiner, Result, check_k, count_changed};
-use fmaps_nn::NnParams;
+use fmaps_nn::{CheckedRows, ImageSearch, NnParams};
 use fmaps_solve::convert::{
     BasisRows, Conversion, gram, point_map, point_map_sinkhorn, pullback, pullback_unweighted,
     pullback_update,
@@ -412,12 +412,40 @@ impl ZoomOut {
         // or `Φ_A`, is a linear image of the same rows at every size.
         let t_part = Instant::now();
         let partitions = balls_partitions(&self.sinkhorn, &side_a.phi, &side_b.phi, self.bijective);
-        let nn_params_a = partitions
-            .0
-            .map_or_else(NnParams::default, |p| NnParams::default().with_partition(p));
-        let nn_params_b = partitions
-            .1
-            .map_or_else(NnParams::default, |p| NnParams::default().with_partition(p));
+        let nn_params_a = partitions.0.as_ref().map_or_else(NnParams::default, |p| {
+            NnParams::default().with_partition(p.clone())
+        });
+        let nn_params_b = partitions.1.as_ref().map_or_else(NnParams::default, |p| {
+            NnParams::default().with_partition(p.clone())
+        });
+        // With clusters (and the direct conversion): the searched rows
+        // copied into their clusters' order once, each image `Φ Cᵀ`
+        // computed in that order; the other side's rows, the queries,
+        // checked once.
+        let image_search = |part: &Option<std::sync::Arc<fmaps_nn::Partition>>,
+                            rows: &BasisRows| match part {
+            Some(p) if !self.adjoint && self.sinkhorn.is_none() => {
+                ImageSearch::new(rows.view(rows.k()), p.clone()).map(Some)
+            }
+            _ => Ok(None),
+        };
+        fn checked<'r>(
+            search: &Option<ImageSearch>,
+            rows: &'r BasisRows,
+        ) -> fmaps_nn::Result<Option<CheckedRows<'r>>> {
+            search
+                .as_ref()
+                .map(|_| CheckedRows::new(rows.view(rows.k())))
+                .transpose()
+        }
+        let images = (
+            image_search(&partitions.0, &side_a.phi).map_err(fmaps_solve::Error::Search)?,
+            image_search(&partitions.1, &side_b.phi).map_err(fmaps_solve::Error::Search)?,
+        );
+        let checked_rows = (
+            checked(&images.1, &side_a.phi).map_err(fmaps_solve::Error::Search)?,
+            checked(&images.0, &side_b.phi).map_err(fmaps_solve::Error::Search)?,
+        );
         let partition_seconds = t_part.elapsed().as_secs_f64();
         report.nn_seconds += partition_seconds;
         let mut nn =
@@ -429,9 +457,24 @@ impl ZoomOut {
                 } else {
                     &nn_params_a
                 };
-                let map = match &self.sinkhorn {
-                    Some(p) => point_map_sinkhorn(c, data, queries, conversion, p)?.0,
-                    None => point_map(c, data, queries, conversion, hint, nn_params)?,
+                // The data side's image search and the queries' checked
+                // rows.
+                let (image, checked) = if std::ptr::eq(data, &side_b.phi) {
+                    (&images.1, &checked_rows.0)
+                } else {
+                    (&images.0, &checked_rows.1)
+                };
+                let map = match (&self.sinkhorn, image, checked) {
+                    (Some(p), _, _) => point_map_sinkhorn(c, data, queries, conversion, p)?.0,
+                    (None, Some(search), Some(q)) => {
+                        let (kb, ka) = c.shape();
+                        let m = faer::MatRef::from_column_major_slice(c.as_slice(), kb, ka);
+                        let hint = hint.filter(|h| h.len() == queries.n());
+                        search
+                            .nearest(m, &q.leading(kb), hint)
+                            .map_err(fmaps_solve::Error::Search)?
+                    }
+                    _ => point_map(c, data, queries, conversion, hint, nn_params)?,
                 };
                 report.nn_searches += 1;
                 report.nn_seconds += t.elapsed().as_secs_f64();

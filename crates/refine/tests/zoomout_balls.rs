@@ -1,0 +1,121 @@
+//! ZoomOut's searches through the ball clusters (no matrix tiles: each
+//! image `Φ_A Cᵀ` computed in the clusters' order, the queries checked
+//! once) give the same maps as the searches without clusters, one way and
+//! bijective. The clusters are made only without tiles and with
+//! `FMAPS_NO_BALLS` unset, both read from the environment: the test runs
+//! this binary's ignored `zoomout_maps` twice as child processes, with
+//! `FMAPS_NO_AMX=1` and with `FMAPS_NO_AMX=1 FMAPS_NO_BALLS=1`, and
+//! compares the maps they print.
+
+use fmaps_eigensolve::{EigenProblem, EigenSolver, NativeSolver, SpectralBasis};
+use fmaps_laplacian::{LaplacianParams, cotan_laplacian};
+use fmaps_mesh_io::TriMesh;
+use fmaps_mesh_io::generate::torus;
+use fmaps_refine::{Refiner, ZoomOut};
+use nalgebra::DMatrix;
+
+fn basis(mesh: &TriMesh, k: usize) -> SpectralBasis {
+    let op = cotan_laplacian(mesh, &LaplacianParams::default());
+    NativeSolver::default()
+        .solve(
+            &EigenProblem::new(op.stiffness.view(), &op.mass).unwrap(),
+            k,
+        )
+        .unwrap()
+}
+
+/// A torus of 1800 vertices (above ZoomOut's 1024 rows for clusters),
+/// bumped by `amp`.
+fn bumpy(amp: f64) -> TriMesh {
+    let (mut v, f) = torus(2.0, 0.8, 60, 30).into_parts();
+    for (i, p) in v.iter_mut().enumerate() {
+        let s = 1.0 + amp * ((i * 31 % 17) as f64 / 17.0 - 0.5);
+        *p = [p[0] * s, p[1] * s * 1.1, p[2] * (2.0 - s)];
+    }
+    TriMesh::new(v, f).unwrap()
+}
+
+/// The maps of this binary's `zoomout_maps` run in a child process with
+/// `env` set.
+fn child_maps(env: &[(&str, &str)]) -> String {
+    let mut cmd = std::process::Command::new(std::env::current_exe().unwrap());
+    cmd.args([
+        "--exact",
+        "zoomout_maps",
+        "--ignored",
+        "--nocapture",
+        "--test-threads",
+        "1",
+    ]);
+    for (k, v) in env {
+        cmd.env(k, v);
+    }
+    let out = cmd.output().unwrap();
+    let text = String::from_utf8_lossy(&out.stdout).into_owned();
+    assert!(
+        out.status.success(),
+        "child failed: {text}{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    // (The harness's "test zoomout_maps ... " may precede the first.)
+    text.lines()
+        .filter_map(|l| l.find("maps bijective").map(|at| &l[at..]))
+        .collect::<Vec<_>>()
+        .join("\n")
+}
+
+#[test]
+fn zoomout_with_and_without_clusters_gives_the_same_maps() {
+    let with = child_maps(&[("FMAPS_NO_AMX", "1")]);
+    let without = child_maps(&[("FMAPS_NO_AMX", "1"), ("FMAPS_NO_BALLS", "1")]);
+    assert!(with.contains("clusters: yes"), "{with}");
+    assert!(without.contains("clusters: no"), "{without}");
+    assert_eq!(with.lines().count(), 2, "{with}");
+    let strip = |s: &str| s.replace("clusters: yes", "").replace("clusters: no", "");
+    assert_eq!(strip(&with), strip(&without));
+}
+
+/// ZoomOut one way and bijective on a pair of bumpy tori; prints each
+/// map (and the final C's bits) on one line, and whether the searches
+/// ran on clusters. Run by the test above in a child process.
+#[test]
+#[ignore = "run by zoomout_with_and_without_clusters_gives_the_same_maps"]
+fn zoomout_maps() {
+    let (a, b) = (bumpy(0.08), bumpy(0.12));
+    let (basis_a, basis_b) = (basis(&a, 40), basis(&b, 40));
+    let rows = DMatrix::from_fn(a.n_vertices(), 40, |i, j| basis_a.eigenvectors[(i, j)]);
+    let clusters = fmaps_nn::Partition::for_balls(fmaps_nn::view(&rows), 1024).is_some();
+    // An initial map with errors (the identity's leading block, bent).
+    let c0 = DMatrix::from_fn(10, 10, |i, j| {
+        (if i == j { 1.0 } else { 0.0 }) + 0.1 * ((3 * i + j) as f64).sin()
+    });
+    for bijective in [false, true] {
+        let zo = ZoomOut {
+            k_start: 10,
+            k_final: 40,
+            step: 3,
+            bijective,
+            ..ZoomOut::default()
+        };
+        let r = zo.refine(&c0, &basis_a, &basis_b).unwrap();
+        // The iterations did move the map (the comparison is not trivial).
+        let moved = r
+            .report
+            .iterations
+            .iter()
+            .map(|it| it.changed)
+            .sum::<usize>();
+        assert!(moved > 100, "bijective: {bijective}: {moved} changes");
+        let c_bits: Vec<String> = r
+            .c_ab
+            .iter()
+            .map(|v| format!("{:x}", v.to_bits()))
+            .collect();
+        println!(
+            "maps bijective: {bijective} clusters: {} t_ba: {:?} c_ab: {}",
+            if clusters { "yes" } else { "no" },
+            r.t_ba,
+            c_bits.join(",")
+        );
+    }
+}
