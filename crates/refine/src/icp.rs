@@ -6,7 +6,7 @@ use fmaps_eigensolve::SpectralBasis;
 use nalgebra::DMatrix;
 
 use crate::{Error, Iteration, RefineReport, Refined, Refiner, Result, check_k, count_changed};
-use fmaps_nn::{NnParams, NnStrategy};
+use fmaps_nn::{CheckedRows, ImageSearch, NnParams, NnStrategy};
 use fmaps_solve::convert::{
     BasisRows, Conversion, point_map, point_map_sinkhorn, pullback, pullback_update,
 };
@@ -116,6 +116,16 @@ impl Icp {
         } else {
             None
         };
+        // With clusters and the direct conversion: A's rows copied into
+        // their clusters' order once, each image `Φ_A Cᵀ` computed in that
+        // order; B's rows checked once.
+        let image = match &partition {
+            Some(p) if !self.adjoint => Some((
+                ImageSearch::new(phi_a.view(ka), p.clone()).map_err(fmaps_solve::Error::Search)?,
+                CheckedRows::new(phi_b.view(kb)).map_err(fmaps_solve::Error::Search)?,
+            )),
+            _ => None,
+        };
         let nn_params = match partition {
             Some(p) => NnParams::with_strategy(NnStrategy::Balls).with_partition(p),
             None => NnParams::with_strategy(if dim > 48 && !fmaps_nn::tiles_available() {
@@ -131,9 +141,10 @@ impl Icp {
         };
         let nn = |c: &DMatrix<f64>, hint: Option<&[usize]>, report: &mut RefineReport| {
             let t = Instant::now();
-            let map = match &self.sinkhorn {
-                Some(p) => point_map_sinkhorn(c, phi_a, phi_b, conversion, p)?.0,
-                None => point_map(c, phi_a, phi_b, conversion, hint, &nn_params)?,
+            let map = match (&self.sinkhorn, &image) {
+                (Some(p), _) => point_map_sinkhorn(c, phi_a, phi_b, conversion, p)?.0,
+                (None, Some((search, q))) => crate::zoomout::image_point_map(c, search, q, hint)?,
+                (None, None) => point_map(c, phi_a, phi_b, conversion, hint, &nn_params)?,
             };
             report.nn_searches += 1;
             report.nn_seconds += t.elapsed().as_secs_f64();

@@ -466,14 +466,7 @@ impl ZoomOut {
                 };
                 let map = match (&self.sinkhorn, image, checked) {
                     (Some(p), _, _) => point_map_sinkhorn(c, data, queries, conversion, p)?.0,
-                    (None, Some(search), Some(q)) => {
-                        let (kb, ka) = c.shape();
-                        let m = faer::MatRef::from_column_major_slice(c.as_slice(), kb, ka);
-                        let hint = hint.filter(|h| h.len() == queries.n());
-                        search
-                            .nearest(m, &q.leading(kb), hint)
-                            .map_err(fmaps_solve::Error::Search)?
-                    }
+                    (None, Some(search), Some(q)) => image_point_map(c, search, q, hint)?,
                     _ => point_map(c, data, queries, conversion, hint, nn_params)?,
                 };
                 report.nn_searches += 1;
@@ -610,6 +603,24 @@ fn balls_partitions(
     } else {
         (balls_partition(a), None)
     }
+}
+
+/// The direct point map `T_BA` of `c` (k_B x k_A) by `search`, the
+/// image search of A's rows, and B's rows `queries` (as
+/// [`fmaps_solve::convert::point_map`] with [`Conversion::Direct`]);
+/// `hint`: a guess per row of B (ignored when the count differs).
+pub(crate) fn image_point_map(
+    c: &DMatrix<f64>,
+    search: &ImageSearch,
+    queries: &CheckedRows<'_>,
+    hint: Option<&[usize]>,
+) -> Result<Vec<usize>> {
+    let (kb, ka) = c.shape();
+    let m = faer::MatRef::from_column_major_slice(c.as_slice(), kb, ka);
+    let hint = hint.filter(|h| h.len() == queries.rows().nrows());
+    Ok(search
+        .nearest(m, &queries.leading(kb), hint)
+        .map_err(fmaps_solve::Error::Search)?)
 }
 
 /// Rows from which the balls pay (below, brute force is as fast).
