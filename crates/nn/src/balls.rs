@@ -186,24 +186,12 @@ impl BallData {
         order: Vec<usize>,
         ranges: Vec<(usize, usize)>,
     ) -> BallData {
-        let geo = geometry(&x_ord, d, &ranges);
-        Self::assemble_with(d, x_ord, order, ranges, geo)
-    }
-
-    /// [`BallData::assemble`] with the rows' geometry already computed
-    /// (by [`geometry_of`] over every ball).
-    pub(crate) fn assemble_with(
-        d: usize,
-        x_ord: Vec<f64>,
-        order: Vec<usize>,
-        ranges: Vec<(usize, usize)>,
-        geo: Geometry,
-    ) -> BallData {
         let nx = order.len();
         let mut pos_of = vec![0u32; nx];
         for (p, &i) in order.iter().enumerate() {
             pos_of[i] = p as u32;
         }
+        let geo = geometry(&x_ord, d, &ranges);
         let mut ball_of = vec![0u32; nx];
         for (b, &(start, len)) in ranges.iter().enumerate() {
             for &i in &order[start..start + len] {
@@ -767,8 +755,7 @@ fn sort_visits(visit: &mut [(f64, u32, u32)]) {
 
 #[path = "balls_geometry.rs"]
 mod geometry;
-use geometry::geometry;
-pub(crate) use geometry::{Geometry, geometry_of};
+use geometry::{Geometry, geometry};
 
 #[path = "balls_bound.rs"]
 mod bound;

@@ -6,8 +6,7 @@ use super::{TANGENT, slack};
 use crate::rows::dot8 as dot;
 
 /// The per-ball geometry of [`super::BallData`] (see its fields).
-#[derive(Debug, Clone, PartialEq)]
-pub(crate) struct Geometry {
+pub(super) struct Geometry {
     /// The ball centres (means; row-major, m x d) and the balls' radii
     /// (rounded up).
     pub(super) centers: Vec<f64>,
@@ -34,70 +33,28 @@ pub(crate) struct Geometry {
     pub(super) eta: f64,
 }
 
-impl Geometry {
-    /// Room for `m` balls of `nx` rows of `d` coordinates, every entry
-    /// zero (filled by [`geometry_of`]).
-    pub(crate) fn zeroed(m: usize, nx: usize, d: usize) -> Geometry {
-        Geometry {
-            centers: vec![0.0; m * d],
-            radii: vec![0.0; m],
-            to_center: vec![0.0; nx],
-            tangent: vec![0.0; m * TANGENT * d],
-            box_lo: vec![0.0; m * TANGENT],
-            box_hi: vec![0.0; m * TANGENT],
-            r_perp: vec![0.0; m],
-            row_tan: vec![0.0; nx * TANGENT],
-            row_perp: vec![0.0; nx],
-            uc: vec![0.0; m * TANGENT],
-            eta: 0.0,
-        }
-    }
-}
-
-/// Each ball's centre, radius and tangent box, and each row's distance
-/// to its centre and coordinates, of the rows `x_ord` (row-major, `d`
-/// wide, in ball order; ball `b` is `ranges[b]`).
-pub(super) fn geometry(x_ord: &[f64], d: usize, ranges: &[(usize, usize)]) -> Geometry {
-    let mut geo = Geometry::zeroed(ranges.len(), x_ord.len() / d.max(1), d);
-    geometry_of(&mut geo, x_ord, d, ranges, 0..ranges.len());
-    geo
-}
-
 crate::cpu::dispatched! {
-    /// [`geometry`] of the balls `balls` only, into `geo` (made by
-    /// [`Geometry::zeroed`] for all of them; `eta` becomes the largest so
-    /// far): only those balls' rows of `x_ord` are read, so a caller may
-    /// fill `x_ord` ball range by ball range and compute each range's
-    /// geometry while its rows are in cache. Each ball's values depend on
-    /// its rows only: the same whatever the ranges.
-    pub(crate) fn geometry_of(
-        geo: &mut Geometry,
-        x_ord: &[f64],
-        d: usize,
-        ranges: &[(usize, usize)],
-        balls: std::ops::Range<usize>,
-    ) -> () {
-            let nx = geo.to_center.len();
+    /// Each ball's centre, radius and tangent box, and each row's distance
+    /// to its centre and coordinates, of the rows `x_ord` (row-major, `d`
+    /// wide, in ball order; ball `b` is `ranges[b]`).
+    pub(super) fn geometry(x_ord: &[f64], d: usize, ranges: &[(usize, usize)]) -> Geometry {
+            let (m, nx) = (ranges.len(), x_ord.len() / d.max(1));
             let sl = slack(d);
-            let Geometry {
-                centers,
-                radii,
-                to_center,
-                tangent,
-                box_lo,
-                box_hi,
-                r_perp,
-                row_tan,
-                row_perp,
-                uc,
-                eta,
-            } = geo;
-            let mut eta = *eta;
+            let mut centers = vec![0.0; m * d];
+            let mut radii = vec![0.0; m];
+            let mut to_center = vec![0.0; nx];
+            let mut tangent = vec![0.0; m * TANGENT * d];
+            let mut box_lo = vec![0.0; m * TANGENT];
+            let mut box_hi = vec![0.0; m * TANGENT];
+            let mut r_perp = vec![0.0; m];
+            let mut row_tan = vec![0.0; nx * TANGENT];
+            let mut row_perp = vec![0.0; nx];
+            let mut uc = vec![0.0; m * TANGENT];
+            let mut eta = 0.0f64;
             // Per ball: its rows less the mean, their squared norms, and
             // what the directions leave of them.
             let (mut e, mut n0, mut res) = (Vec::new(), Vec::new(), Vec::new());
-            for c in balls {
-                let (start, len) = ranges[c];
+            for (c, &(start, len)) in ranges.iter().enumerate() {
                 let rows = &x_ord[start * d..(start + len) * d];
                 let mean = &mut centers[c * d..(c + 1) * d];
                 for row in rows.chunks_exact(d) {
@@ -197,10 +154,7 @@ crate::cpu::dispatched! {
                         row_tan[i * nx + start..i * nx + start + len].fill(0.0);
                     }
                 }
-                // (This ball's bound: the rows' distances from its span
-                // need only its own directions' departure.)
-                let own = f.sqrt() + 1e-14;
-                eta = eta.max(own);
+                eta = eta.max(f.sqrt() + 1e-14);
                 let (lo, hi) = (
                     &mut box_lo[c * TANGENT..(c + 1) * TANGENT],
                     &mut box_hi[c * TANGENT..(c + 1) * TANGENT],
@@ -216,7 +170,7 @@ crate::cpu::dispatched! {
                         hi[i] = hi[i].max(a);
                         a2 += a * a;
                     }
-                    let p2 = nk * (1.0 + sl) - a2 * (1.0 - sl) / (1.0 + own);
+                    let p2 = nk * (1.0 + sl) - a2 * (1.0 - sl) / (1.0 + eta);
                     row_perp[start + k] = (p2.max(0.0) + sl * r * r).sqrt() * (1.0 + sl);
                     perp2 = perp2.max(p2);
                 }
@@ -228,6 +182,18 @@ crate::cpu::dispatched! {
                     uc[c * TANGENT + i] = dot(&u[i * d..(i + 1) * d], mean);
                 }
             }
-        geo.eta = eta;
+        Geometry {
+            centers,
+            radii,
+            to_center,
+            tangent,
+            box_lo,
+            box_hi,
+            r_perp,
+            row_tan,
+            row_perp,
+            uc,
+            eta,
+        }
     }
 }

@@ -127,37 +127,3 @@ fn order_by_key_is_the_sorted_order() {
         assert_eq!(order_by_key(n, m, key), want, "n = {n}, m = {m}");
     }
 }
-
-/// The geometry taken ball range by ball range (as `ImageSearch` does,
-/// part by part while each part's rows are in cache) is the geometry of
-/// one call, value for value (each ball's values depend on its rows
-/// only); a part of one ball and parts of several both.
-#[test]
-fn geometry_in_parts_is_the_geometry_at_once() {
-    let (n, d) = (700, 37);
-    let x: Vec<f64> = (0..n * d)
-        .map(|t| {
-            let (i, j) = (t / d, t % d);
-            ((i as f64 * 0.37 + j as f64).sin() * (1.0 + j as f64).sqrt()).cos() / (1.0 + j as f64)
-        })
-        .collect();
-    // Balls of 1 to 40 rows, in order.
-    let mut ranges = Vec::new();
-    let mut start = 0;
-    while start < n {
-        let len = (1 + (start * 7) % 40).min(n - start);
-        ranges.push((start, len));
-        start += len;
-    }
-    let whole = geometry(&x, d, &ranges);
-    for cuts in [vec![1], vec![3, 4, 10], (1..ranges.len()).collect()] {
-        let mut parts = Geometry::zeroed(ranges.len(), n, d);
-        let mut b0 = 0;
-        for b1 in cuts.into_iter().chain([ranges.len()]) {
-            geometry_of(&mut parts, &x, d, &ranges, b0..b1);
-            b0 = b1;
-        }
-        assert_eq!(parts, whole);
-    }
-    assert!(whole.eta > 0.0 && whole.radii.iter().all(|&r| r > 0.0));
-}

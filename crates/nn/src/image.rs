@@ -6,15 +6,10 @@ use std::sync::{Arc, Mutex};
 use faer::linalg::matmul::matmul;
 use faer::{Accum, MatMut, MatRef, Par};
 
-use crate::balls::{BallData, Geometry, geometry_of};
+use crate::balls::BallData;
 use crate::brute::{F32_COMFORT, scale_for};
 use crate::rows::Rows;
 use crate::{Error, Partition, Result, check_finite, check_input};
-
-/// Rows of the image computed (and their balls' geometry taken) at a
-/// time, at most (whole balls; one ball when larger): a part and its
-/// rows of `X` stay in a core's L2 cache.
-const PART_ROWS: usize = 512;
 
 /// Query rows whose coordinates were checked (all finite) once, with
 /// their largest magnitude: searched many times ([`ImageSearch::nearest`]),
@@ -182,20 +177,14 @@ impl ImageSearch {
         // (Only a longer image than the last one zeroes its new tail.)
         image.resize(n * k_out, 0.0);
         let rows = MatRef::from_row_major_slice_with_stride(&self.rows, n, k_in, self.k);
-        let product = |image: &mut [f64], r0: usize, len: usize| {
-            matmul(
-                MatMut::from_row_major_slice_mut(
-                    &mut image[r0 * k_out..(r0 + len) * k_out],
-                    len,
-                    k_out,
-                ),
-                Accum::Replace,
-                rows.subrows(r0, len),
-                m.transpose(),
-                1.0,
-                Par::rayon(0),
-            );
-        };
+        matmul(
+            MatMut::from_row_major_slice_mut(&mut image, n, k_out),
+            Accum::Replace,
+            rows,
+            m.transpose(),
+            1.0,
+            Par::rayon(0),
+        );
         // No scan of the image where it is bounded inside f32's comfort
         // range, like the queries (finite, and no rescaling: the scale
         // found by a scan would be none too): each entry is at most
@@ -205,45 +194,22 @@ impl ImageSearch {
         let q_max = queries.max_abs;
         let margin = 1.0 + 4.0 * (self.k as f64 + 2.0) * f64::EPSILON;
         let bound = self.norm_max * row_norm_max(m) * margin;
-        let balls = if bound <= F32_COMFORT && (1.0 / F32_COMFORT..=F32_COMFORT).contains(&q_max) {
-            // Neither a scan nor a scale: the image is computed a few
-            // hundred rows (whole balls) at a time, and each part's
-            // geometry taken while its rows are in cache.
-            let ranges = &self.ranges;
-            let mut geo = Geometry::zeroed(ranges.len(), n, k_out);
-            let mut b0 = 0;
-            while b0 < ranges.len() {
-                let r0 = ranges[b0].0;
-                let mut b1 = b0 + 1;
-                while b1 < ranges.len() && ranges[b1].0 + ranges[b1].1 - r0 <= PART_ROWS {
-                    b1 += 1;
-                }
-                let (last, len) = ranges[b1 - 1];
-                product(&mut image, r0, last + len - r0);
-                geometry_of(&mut geo, &image, k_out, ranges, b0..b1);
-                b0 = b1;
-            }
-            BallData::assemble_with(k_out, image, self.order.clone(), ranges.clone(), geo)
+        let x_max = if bound <= F32_COMFORT && (1.0 / F32_COMFORT..=F32_COMFORT).contains(&q_max) {
+            bound
         } else {
-            product(&mut image, 0, n);
-            let Some(x_max) =
-                Rows::of(MatRef::from_row_major_slice(&image, n, k_out)).max_abs_finite()
-            else {
-                return Err(self.non_finite(&image, k_out));
-            };
-            let scale = scale_for(x_max.max(q_max));
-            if let Some(s) = scale {
-                // (A power of two: the same values as scaling on a copy.)
-                for v in &mut image {
-                    *v *= s;
-                }
+            match Rows::of(MatRef::from_row_major_slice(&image, n, k_out)).max_abs_finite() {
+                Some(v) => v,
+                None => return Err(self.non_finite(&image, k_out)),
             }
-            let balls = BallData::assemble(k_out, image, self.order.clone(), self.ranges.clone());
-            let found = balls.search_rows(&Rows::of(q), hint, scale);
-            *self.image.lock().unwrap_or_else(|e| e.into_inner()) = balls.into_rows();
-            return Ok(found);
         };
-        let scale = None;
+        let scale = scale_for(x_max.max(q_max));
+        if let Some(s) = scale {
+            // (A power of two: the same values as scaling on a copy.)
+            for v in &mut image {
+                *v *= s;
+            }
+        }
+        let balls = BallData::assemble(k_out, image, self.order.clone(), self.ranges.clone());
         let found = balls.search_rows(&Rows::of(q), hint, scale);
         *self.image.lock().unwrap_or_else(|e| e.into_inner()) = balls.into_rows();
         Ok(found)
