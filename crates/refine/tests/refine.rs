@@ -3,13 +3,15 @@
 //! the true map is a permutation and the two bases are independent (signs
 //! and near-degenerate eigenspaces differ).
 
-use fmaps_eigensolve::{EigenProblem, EigenSolver, NativeSolver, SpectralBasis};
-use fmaps_laplacian::{LaplacianParams, cotan_laplacian};
+use fmaps_eigensolve::SpectralBasis;
 use fmaps_mesh_io::TriMesh;
 use fmaps_mesh_io::generate::torus;
 use fmaps_refine::{Error, Icp, Refiner, Subsample, ZoomOut, farthest_point_sampling};
 use fmaps_solve::{fmap_from_point_map, point_map_from_fmap};
 use nalgebra::DMatrix;
+
+mod common;
+use common::basis;
 
 struct Pair {
     a: TriMesh,
@@ -18,16 +20,6 @@ struct Pair {
     basis_b: SpectralBasis,
     /// True map B → A.
     t_ba: Vec<usize>,
-}
-
-fn basis(mesh: &TriMesh, k: usize) -> SpectralBasis {
-    let op = cotan_laplacian(mesh, &LaplacianParams::default());
-    NativeSolver::default()
-        .solve(
-            &EigenProblem::new(op.stiffness.view(), &op.mass).unwrap(),
-            k,
-        )
-        .unwrap()
 }
 
 /// A fixed pseudo-random permutation `perm[new] = old` of `0..n` (from

@@ -7,22 +7,13 @@
 //! `FMAPS_NO_AMX=1` and with `FMAPS_NO_AMX=1 FMAPS_NO_BALLS=1`, and
 //! compares the maps they print.
 
-use fmaps_eigensolve::{EigenProblem, EigenSolver, NativeSolver, SpectralBasis};
-use fmaps_laplacian::{LaplacianParams, cotan_laplacian};
 use fmaps_mesh_io::TriMesh;
 use fmaps_mesh_io::generate::torus;
 use fmaps_refine::{Icp, Refiner, ZoomOut};
 use nalgebra::DMatrix;
 
-fn basis(mesh: &TriMesh, k: usize) -> SpectralBasis {
-    let op = cotan_laplacian(mesh, &LaplacianParams::default());
-    NativeSolver::default()
-        .solve(
-            &EigenProblem::new(op.stiffness.view(), &op.mass).unwrap(),
-            k,
-        )
-        .unwrap()
-}
+mod common;
+use common::basis;
 
 /// A torus of 1800 vertices (above ZoomOut's 1024 rows for clusters),
 /// bumped by `amp`.
