@@ -457,17 +457,23 @@ impl ZoomOut {
                 } else {
                     &nn_params_a
                 };
-                // The data side's image search and the queries' checked
-                // rows.
-                let (image, checked) = if std::ptr::eq(data, &side_b.phi) {
-                    (&images.1, &checked_rows.0)
-                } else {
-                    (&images.0, &checked_rows.1)
+                // The image search of the data side and the queries'
+                // checked rows, only for the rows they were made of (not,
+                // e.g., all vertices after iterations on samples).
+                let same = |a: &BasisRows, b: &BasisRows| {
+                    std::ptr::eq(data, a) && std::ptr::eq(queries, b)
                 };
-                let map = match (&self.sinkhorn, image, checked) {
-                    (Some(p), _, _) => point_map_sinkhorn(c, data, queries, conversion, p)?.0,
-                    (None, Some(search), Some(q)) => image_point_map(c, search, q, hint)?,
-                    _ => point_map(c, data, queries, conversion, hint, nn_params)?,
+                let image = if same(&side_a.phi, &side_b.phi) {
+                    images.0.as_ref().zip(checked_rows.1.as_ref())
+                } else if same(&side_b.phi, &side_a.phi) {
+                    images.1.as_ref().zip(checked_rows.0.as_ref())
+                } else {
+                    None
+                };
+                let map = match (&self.sinkhorn, image) {
+                    (Some(p), _) => point_map_sinkhorn(c, data, queries, conversion, p)?.0,
+                    (None, Some((search, q))) => image_point_map(c, search, q, hint)?,
+                    (None, None) => point_map(c, data, queries, conversion, hint, nn_params)?,
                 };
                 report.nn_searches += 1;
                 report.nn_seconds += t.elapsed().as_secs_f64();

@@ -1,15 +1,16 @@
 //! ZoomOut's and ICP's searches through the ball clusters (no matrix
 //! tiles: each image `Φ_A Cᵀ` computed in the clusters' order, the
 //! queries checked once) give the same maps as the searches without
-//! clusters (ZoomOut one way and bijective, ICP). The clusters are made only without tiles and with
-//! `FMAPS_NO_BALLS` unset, both read from the environment: the test runs
+//! clusters (ZoomOut one way, bijective and on samples, ICP). The
+//! clusters are made only without tiles and with `FMAPS_NO_BALLS` unset,
+//! both read from the environment: the test runs
 //! this binary's ignored `zoomout_maps` twice as child processes, with
 //! `FMAPS_NO_AMX=1` and with `FMAPS_NO_AMX=1 FMAPS_NO_BALLS=1`, and
 //! compares the maps they print.
 
 use fmaps_mesh_io::TriMesh;
 use fmaps_mesh_io::generate::torus;
-use fmaps_refine::{Icp, Refiner, ZoomOut};
+use fmaps_refine::{Icp, Refiner, Subsample, ZoomOut};
 use nalgebra::DMatrix;
 
 mod common;
@@ -61,12 +62,13 @@ fn zoomout_with_and_without_clusters_gives_the_same_maps() {
     let without = child_maps(&[("FMAPS_NO_AMX", "1"), ("FMAPS_NO_BALLS", "1")]);
     assert!(with.contains("clusters: yes"), "{with}");
     assert!(without.contains("clusters: no"), "{without}");
-    assert_eq!(with.lines().count(), 3, "{with}");
+    assert_eq!(with.lines().count(), 4, "{with}");
     let strip = |s: &str| s.replace("clusters: yes", "").replace("clusters: no", "");
     assert_eq!(strip(&with), strip(&without));
 }
 
-/// ZoomOut one way and bijective, and ICP, on a pair of bumpy tori;
+/// ZoomOut one way, bijective and on samples, and ICP, on a pair of
+/// bumpy tori;
 /// prints each
 /// map (and the final C's bits) on one line, and whether the searches
 /// ran on clusters. Run by the test above in a child process.
@@ -81,7 +83,13 @@ fn zoomout_maps() {
     let c0 = DMatrix::from_fn(10, 10, |i, j| {
         (if i == j { 1.0 } else { 0.0 }) + 0.1 * ((3 * i + j) as f64).sin()
     });
-    for (name, bijective) in [("zoomout", false), ("zoomout", true), ("icp", false)] {
+    let runs = [
+        ("zoomout", false),
+        ("zoomout", true),
+        ("zoomout-samples", false),
+        ("icp", false),
+    ];
+    for (name, bijective) in runs {
         let zo = ZoomOut {
             k_start: 10,
             k_final: 40,
@@ -96,6 +104,16 @@ fn zoomout_maps() {
             Icp::default()
                 .refine(&start.c_ab, &basis_a, &basis_b)
                 .unwrap()
+        } else if name == "zoomout-samples" {
+            // Iterations on 1100 samples per shape (their own clusters),
+            // then one on every vertex and the final search (all rows'
+            // clusters).
+            let sampled = ZoomOut {
+                subsample: Some(Subsample::farthest(a.vertices(), b.vertices(), 1100)),
+                full_iterations: 1,
+                ..zo
+            };
+            sampled.refine(&c0, &basis_a, &basis_b).unwrap()
         } else {
             zo.refine(&c0, &basis_a, &basis_b).unwrap()
         };
