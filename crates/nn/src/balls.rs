@@ -98,8 +98,8 @@ pub(crate) struct BallData {
 
 /// Directions per ball of the tangent bound: the rows of a small ball of
 /// a surface's spectral embedding lie close to a 2-dimensional patch,
-/// bent by curvature into a few more.
-pub(crate) const TANGENT: usize = 4;
+/// bent by curvature into a few more (three pay best; docs/tuning.md).
+pub(crate) const TANGENT: usize = 3;
 
 /// Query `t` of the search order: row `map[t]` of `rows` (row `t` without
 /// a map).

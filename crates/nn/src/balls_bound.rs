@@ -171,13 +171,13 @@ pub(super) unsafe fn tangent_filter_avx512(
                 _mm512_add_pd(_mm512_mul_pd(sl_v, _mm512_add_pd(q_norm, c_len)), t_err),
                 tiny,
             );
-            let s_idx = _mm256_slli_epi32::<2>(_mm256_mmask_i32gather_epi32::<4>(
-                z,
-                valid,
-                j,
-                slot.as_ptr().cast(),
-            ));
-            let j4 = _mm256_slli_epi32::<2>(j);
+            // (Each ball and slot has TANGENT entries.)
+            let per = _mm256_set1_epi32(TANGENT as i32);
+            let s_idx = _mm256_mullo_epi32(
+                _mm256_mmask_i32gather_epi32::<4>(z, valid, j, slot.as_ptr().cast()),
+                per,
+            );
+            let j4 = _mm256_mullo_epi32(j, per);
             let (mut gap2, mut t2) = (zero, zero);
             for t in 0..TANGENT {
                 let tt = _mm256_set1_epi32(t as i32);
