@@ -71,7 +71,6 @@ impl<'a> CheckedRows<'a> {
 /// ties to the smallest index).
 ///
 /// ```
-/// use std::sync::Arc;
 /// use fmaps_nn::{CheckedRows, ImageSearch, NnParams, NnStrategy, Partition, nearest_rows};
 ///
 /// let x = faer::Mat::<f64>::from_fn(200, 6, |i, j| ((i * (j + 3)) as f64 * 0.01).sin());
