@@ -101,6 +101,12 @@ pub(crate) struct BallData {
 /// bent by curvature into a few more (three pay best; docs/tuning.md).
 pub(crate) const TANGENT: usize = 3;
 
+/// Room past the end of the lists the AVX-512 kernels write: they store
+/// whole vectors of compressed indices (a compress into a register and a
+/// plain store, not the compressing store to memory: `plain_pass_avx512`),
+/// at most sixteen entries past the last one kept.
+const PAD: usize = 16;
+
 /// Query `t` of the search order: row `map[t]` of `rows` (row `t` without
 /// a map).
 #[inline(always)]
@@ -454,7 +460,7 @@ impl BallWork {
                     // is u32::MAX between blocks).
                     work.pass = vec![0.0; m];
                     work.slot = vec![u32::MAX; m];
-                    work.keep = vec![0; m];
+                    work.keep = vec![0; m + PAD];
                 }
                 f(work)
             }
@@ -468,7 +474,7 @@ impl BallWork {
             pass: vec![0.0; m],
             p_list: Vec::new(),
             p_start: Vec::with_capacity(QUERY_BLOCK + 1),
-            keep: vec![0; m],
+            keep: vec![0; m + PAD],
             cands: Vec::new(),
             slot: vec![u32::MAX; m],
             ut: Vec::new(),
@@ -511,8 +517,8 @@ crate::cpu::dispatched! {
         // instruction set this function is dispatched to.
         // Room for every query's list (grown once per thread: no zeroing
         // per query); the lists follow one another from the start.
-        if work.p_list.len() < len * m {
-            work.p_list.resize(len * m, 0);
+        if work.p_list.len() < len * m + PAD {
+            work.p_list.resize(len * m + PAD, 0);
         }
         let mut p_len = 0;
         work.p_start.clear();
@@ -568,16 +574,17 @@ crate::cpu::dispatched! {
                 reach,
                 sl,
             };
-            let list = &mut work.p_list[p_len..p_len + m];
+            let list = &mut work.p_list[p_len..p_len + m + PAD];
             #[cfg(target_arch = "x86_64")]
             let n = if v4 {
-                // SAFETY: the CPU has x86-64-v4 (checked above).
+                // SAFETY: the CPU has x86-64-v4 (checked above); `list`
+                // holds PAD entries past the m balls.
                 unsafe { plain_pass_avx512(this, g, plain, list) }
             } else {
-                plain_pass(this, g, plain, &mut work.pass[..m], list)
+                plain_pass(this, g, plain, &mut work.pass[..m], &mut list[..m])
             };
             #[cfg(not(target_arch = "x86_64"))]
-            let n = plain_pass(this, g, plain, &mut work.pass[..m], list);
+            let n = plain_pass(this, g, plain, &mut work.pass[..m], &mut list[..m]);
             work.p_start.push(p_len);
             p_len += n;
         }
@@ -630,7 +637,7 @@ crate::cpu::dispatched! {
                     t_err: work.t_err[i],
                     sl,
                 };
-                let keep = &mut work.keep[..passed.len()];
+                let keep = &mut work.keep[..passed.len() + PAD];
                 // SAFETY: x86-64-v4 (checked above); the passing balls are
                 // below m (`slot`, `g`), their slots within `tcol`.
                 let n = unsafe {

@@ -124,7 +124,8 @@ pub(super) struct BoundQuery {
 ///
 /// The CPU must have AVX-512 F and VL, and POPCNT (x86-64-v4). Every
 /// ball of `list` must be below `g.len()` and `slot.len()`, with a slot
-/// whose products lie in `tcol`; `keep` must hold `list.len()` entries.
+/// whose products lie in `tcol`; `keep` must hold `list.len() + 8`
+/// entries (whole vectors of eight are stored).
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx512f,avx512bw,avx512vl,avx2,fma,popcnt")]
 #[allow(clippy::too_many_arguments)]
@@ -223,10 +224,16 @@ pub(super) unsafe fn tangent_filter_avx512(
         let lt = _mm512_add_pd(_mm512_mul_pd(gap2, flat), _mm512_mul_pd(pb, pb));
         let lb2 = _mm512_mul_pd(_mm512_max_pd(lt, _mm512_mul_pd(plain, plain)), keep2);
         let pass = _mm512_mask_cmp_pd_mask::<_CMP_LE_OQ>(valid, lb2, bar);
-        // SAFETY: `pass` ⊆ `valid`: n + popcount ≤ k + 8 ∧ ≤ list.len().
+        // The kept indices compressed in a register (merging, not
+        // zeroing) and stored whole: see `plain_pass_avx512`.
+        // SAFETY: n ≤ k < list.len(), so the eight lanes stored end
+        // before list.len() + 8 ≤ keep.len().
         unsafe {
             let j = _mm256_maskz_loadu_epi32(valid, list.as_ptr().add(k).cast());
-            _mm256_mask_compressstoreu_epi32(keep.as_mut_ptr().add(n).cast(), pass, j);
+            _mm256_storeu_si256(
+                keep.as_mut_ptr().add(n).cast(),
+                _mm256_mask_compress_epi32(j, pass, j),
+            );
         }
         n += pass.count_ones() as usize;
         k += 8;

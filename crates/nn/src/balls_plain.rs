@@ -3,7 +3,7 @@
 //! its f32 dot products with the centres; a portable loop, and an
 //! AVX-512 kernel with the same operations (the same passing balls).
 
-use super::BallData;
+use super::{BallData, PAD};
 
 /// A query's plain-bound inputs: `|q|²`, its share of the f32 products'
 /// error, the reach (the farthest its nearest row can be) and the slack.
@@ -65,7 +65,11 @@ pub(super) fn plain_pass(
 
 /// [`plain_pass`] in AVX-512: the same operations on eight balls at a
 /// time (no fused multiply-adds: the same margins, bit for bit), the
-/// passing balls' indices stored by one compress per sixteen.
+/// passing balls' indices compressed in a register per sixteen and
+/// stored whole (the compressing store to memory is microcoded on AMD's
+/// Zen 4, and there a compress with zeroing is several times slower than
+/// one merging into a register: LLVM issues 133568 and 206849). `list` holds the m balls' entries and [`PAD`] more (the
+/// last store may write up to fifteen past the last ball).
 ///
 /// # Safety
 ///
@@ -79,7 +83,7 @@ pub(super) unsafe fn plain_pass_avx512(
     list: &mut [u32],
 ) -> usize {
     use std::arch::x86_64::*;
-    let m = list.len();
+    let m = list.len() - PAD;
     let (c_norm, radii, c_err) = (&this.c_norm[..m], &this.geo.radii[..m], &this.c_err[..m]);
     let g = &g[..m];
     let (qn, q_err, reach) = (
@@ -131,9 +135,14 @@ pub(super) unsafe fn plain_pass_avx512(
         let mask = u16::from(margins(j, lo))
             | u16::from(if hi != 0 { margins(j + 8, hi) } else { 0 }) << 8;
         let idx = _mm512_add_epi32(_mm512_set1_epi32(j as i32), lanes);
-        // SAFETY: `mask` has at most m − j bits set, and n + (bits set
-        // so far) ≤ j, so the compressed store ends within `list`.
-        unsafe { _mm512_mask_compressstoreu_epi32(list.as_mut_ptr().add(n).cast(), mask, idx) };
+        // SAFETY: n ≤ j < m (each ball adds at most one entry), so the
+        // sixteen lanes stored end before m + PAD ≤ list.len().
+        unsafe {
+            _mm512_storeu_si512(
+                list.as_mut_ptr().add(n).cast(),
+                _mm512_mask_compress_epi32(idx, mask, idx),
+            )
+        };
         n += mask.count_ones() as usize;
         j += 16;
     }
