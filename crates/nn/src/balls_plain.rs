@@ -3,7 +3,9 @@
 //! its f32 dot products with the centres; a portable loop, and an
 //! AVX-512 kernel with the same operations (the same passing balls).
 
-use super::{BallData, PAD};
+use super::BallData;
+#[cfg(target_arch = "x86_64")]
+use super::PAD;
 
 /// A query's plain-bound inputs: `|q|²`, its share of the f32 products'
 /// error, the reach (the farthest its nearest row can be) and the slack.
