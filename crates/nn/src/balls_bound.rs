@@ -140,6 +140,10 @@ pub(super) unsafe fn tangent_filter_avx512(
     keep: &mut [u32],
 ) -> usize {
     use std::arch::x86_64::*;
+    assert!(
+        keep.len() >= list.len() + 8,
+        "`keep` has no room for whole vectors"
+    );
     let geo = &this.geo;
     let eta = geo.eta;
     let sl = q.sl;

@@ -70,12 +70,14 @@ pub(super) fn plain_pass(
 /// passing balls' indices compressed in a register per sixteen and
 /// stored whole (the compressing store to memory is microcoded on AMD's
 /// Zen 4, and there a compress with zeroing is several times slower than
-/// one merging into a register: LLVM issues 133568 and 206849). `list` holds the m balls' entries and [`PAD`] more (the
-/// last store may write up to fifteen past the last ball).
+/// one merging into a register: LLVM issues 133568 and 206849). `list`
+/// holds the m balls' entries and [`PAD`] more (the last store may write
+/// up to fifteen past the last ball).
 ///
 /// # Safety
 ///
-/// The CPU must have AVX-512 F and VL, and POPCNT (x86-64-v4).
+/// The CPU must have AVX-512 F and VL, and POPCNT (x86-64-v4). `g`, and
+/// the balls' arrays, hold at least `list.len() − PAD` entries.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx512f,avx512bw,avx512vl,avx2,fma,popcnt")]
 pub(super) unsafe fn plain_pass_avx512(
@@ -85,6 +87,7 @@ pub(super) unsafe fn plain_pass_avx512(
     list: &mut [u32],
 ) -> usize {
     use std::arch::x86_64::*;
+    assert!(list.len() >= PAD, "the list has no room past its balls");
     let m = list.len() - PAD;
     let (c_norm, radii, c_err) = (&this.c_norm[..m], &this.geo.radii[..m], &this.c_err[..m]);
     let g = &g[..m];
