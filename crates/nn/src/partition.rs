@@ -23,9 +23,11 @@ pub struct Partition {
 
 /// Rows per block of the assignment step.
 const BLOCK: usize = 256;
-/// Clusters above which a Lloyd step compares each row with the
+/// Clusters above which every Lloyd step compares each row with the
 /// [`LOCAL_CANDIDATES`] clusters nearest its own instead of with all
-/// (the full comparison costs n²d/size per step: minutes at 80k rows).
+/// (the full comparison costs n²d/size per step: minutes at 80k rows);
+/// below, the first step compares with all, the later ones with
+/// [`STEP_CANDIDATES`].
 const LOCAL_FROM: usize = 512;
 /// Clusters a row is compared with in a local Lloyd step (its own among
 /// them).
@@ -66,6 +68,79 @@ crate::cpu::dispatched! {
             }
         }
         (out.1 != u32::MAX).then_some(out.1)
+    }
+}
+
+/// Clusters a row is compared with in the Lloyd steps after the first
+/// (with fewer than [`LOCAL_FROM`] clusters; the first compares with all):
+/// those nearest its own cluster's mean after the first step, its own
+/// among them. The first step moves the bisection's elongated cells the
+/// most; after it a row's nearest mean is among those of its cluster's
+/// neighbours (and the search is exact with any partition).
+const STEP_CANDIDATES: usize = 16;
+
+crate::cpu::dispatched! {
+    /// A local Lloyd assignment: each row of `order[start..start + len]`
+    /// for the `(start, len, a)` of `groups` (the rows of cluster `a`) to
+    /// the nearest of the [`STEP_CANDIDATES`] clusters `near[a]` (the
+    /// first minimising `c_norm[j] − 2 x·c_j`, ties to the smaller index),
+    /// the products in f32 from the rows `rows32` and centres `c32` (`d`
+    /// wide), the candidates' coordinates side by side in SIMD lanes.
+    /// Returns the new label of each of those rows, in that order.
+    fn local_assign(
+        rows32: &[f32],
+        c32: &[f32],
+        d: usize,
+        c_norm: &[f64],
+        near: &[u32],
+        order: &[usize],
+        groups: &[(usize, usize, u32)],
+    ) -> Vec<u32> {
+        const L: usize = STEP_CANDIDATES;
+        let mut out = Vec::new();
+        // The candidates' means, transposed: coordinate i of candidate s
+        // at i * L + s.
+        let mut ct = vec![0.0f32; d * L];
+        for &(start, len, a) in groups {
+            let cands = &near[a as usize * L..(a as usize + 1) * L];
+            for (s, &j) in cands.iter().enumerate() {
+                for (i, &v) in c32[j as usize * d..(j as usize + 1) * d].iter().enumerate() {
+                    ct[i * L + s] = v;
+                }
+            }
+            for &r in &order[start..start + len] {
+                let row = &rows32[r * d..(r + 1) * d];
+                // Four sums (coordinates i mod 4), so that the adds do
+                // not all wait for one another.
+                let (mut a0, mut a1, mut a2, mut a3) = ([0.0f32; L], [0.0f32; L], [0.0f32; L], [0.0f32; L]);
+                let (rq, cq) = (row.chunks_exact(4), ct.chunks_exact(4 * L));
+                let (rr, cr) = (rq.remainder(), cq.remainder());
+                for (x, c) in rq.zip(cq) {
+                    let c: &[f32; 4 * L] = c.try_into().expect("4 L lanes");
+                    for l in 0..L {
+                        a0[l] += x[0] * c[l];
+                        a1[l] += x[1] * c[L + l];
+                        a2[l] += x[2] * c[2 * L + l];
+                        a3[l] += x[3] * c[3 * L + l];
+                    }
+                }
+                for (&x, c) in rr.iter().zip(cr.chunks_exact(L)) {
+                    for l in 0..L {
+                        a0[l] += x * c[l];
+                    }
+                }
+                let mut best = (f64::INFINITY, a);
+                for (s, &j) in cands.iter().enumerate() {
+                    let dot = (a0[s] + a1[s]) + (a2[s] + a3[s]);
+                    let v = c_norm[j as usize] - 2.0 * f64::from(dot);
+                    if v < best.0 || (v == best.0 && j < best.1) {
+                        best = (v, j);
+                    }
+                }
+                out.push(best.1);
+            }
+        }
+        out
     }
 }
 
@@ -243,7 +318,9 @@ impl Partition {
     /// k-means clusters of the rows of `rows` (n x d), about `size` rows
     /// each: the principal-direction bisection of the rows into clusters of
     /// at most `size`, then `steps` Lloyd steps (each row to its nearest
-    /// cluster mean, by one f64 GEMM per block of rows). Bisection alone
+    /// cluster mean: in the first step among all of them, by one f32 GEMM
+    /// per block of rows; in the later ones among the means nearest its
+    /// own cluster's, [`STEP_CANDIDATES`] of them). Bisection alone
     /// gives elongated clusters; a few Lloyd steps make them round, which
     /// is what bounding balls need (on FAUST's spectral embeddings, five
     /// steps cut the rows a query visits 3-6x).
@@ -294,7 +371,7 @@ impl Partition {
         let m = ranges.len();
         let mut near: Vec<u32> = Vec::new();
         let mut rows32: Vec<f32> = Vec::new();
-        for _ in 0..steps {
+        for step in 0..steps {
             let mut centers = vec![0.0; m * d];
             let mut count = vec![0usize; m];
             for (row, &l) in rows.chunks_exact(d).zip(&labels) {
@@ -348,6 +425,31 @@ impl Partition {
                 rows32 = rows.iter().map(|&v| v as f32).collect();
             }
             let c32: Vec<f32> = centers.iter().map(|&v| v as f32).collect();
+            if step > 0 && m > 2 * STEP_CANDIDATES {
+                // After the first step: each row against the clusters
+                // nearest its own (found once, from the first step's
+                // means), the rows cluster by cluster.
+                if near.is_empty() {
+                    near = nearest_centres(&centers, &c_norm, d, STEP_CANDIDATES);
+                }
+                let (order, ranges) = Partition {
+                    labels: labels.clone(),
+                }
+                .groups();
+                let groups: Vec<(usize, usize, u32)> = ranges
+                    .iter()
+                    .map(|&(start, len)| (start, len, labels[order[start]]))
+                    .collect();
+                let (rows32, c32, c_norm, near, order) = (&rows32, &c32, &c_norm, &near, &order);
+                let parts: Vec<Vec<u32>> = groups
+                    .par_chunks(16)
+                    .map(|g| local_assign(rows32, c32, d, c_norm, near, order, g))
+                    .collect();
+                for (&i, l) in order.iter().zip(parts.into_iter().flatten()) {
+                    labels[i] = l;
+                }
+                continue;
+            }
             let cm = MatRef::from_row_major_slice(&c32, m, d);
             let rows32 = &rows32;
             labels
@@ -479,7 +581,64 @@ mod tests {
         crate::set_simd_cap(None);
     }
 
-    /// Lloyd steps, over all clusters (few clusters) or over each row's
+    /// A local assignment takes, for every row, the first least score
+    /// `c_norm[j] − 2 x·c_j` among its cluster's candidates (the products
+    /// summed in f64 here, so equal up to the f32 sums' rounding, far
+    /// below the gaps of these scores), in the order of the groups' rows;
+    /// at every SIMD level this CPU has, with the same labels at each.
+    #[test]
+    fn local_assign_takes_the_nearest_candidate() {
+        const L: usize = STEP_CANDIDATES;
+        let (m, d, n) = (40, 13, 300);
+        let val = |t: usize| (((t * 2654435761) % 1000) as f32 / 250.0) - 2.0;
+        let rows32: Vec<f32> = (0..n * d).map(val).collect();
+        let c32: Vec<f32> = (0..m * d).map(|t| val(t + 7919)).collect();
+        let c_norm: Vec<f64> = c32
+            .chunks_exact(d)
+            .map(|c| c.iter().map(|&v| f64::from(v) * f64::from(v)).sum())
+            .collect();
+        // Candidates of cluster a: a itself, then every other in turn.
+        let near: Vec<u32> = (0..m)
+            .flat_map(|a| (0..L).map(move |s| ((a + 3 * s) % m) as u32))
+            .collect();
+        // Rows in an arbitrary order, in three groups of clusters.
+        let order: Vec<usize> = (0..n).map(|t| (t * 7) % n).collect();
+        let groups = [(0, 100, 5u32), (100, 150, 0), (250, 50, 39)];
+        let mut first = None;
+        for level in crate::SimdLevel::ALL {
+            crate::set_simd_cap(Some(level));
+            let got = local_assign(&rows32, &c32, d, &c_norm, &near, &order, &groups);
+            assert_eq!(got.len(), n);
+            let mut at = 0;
+            for &(start, len, a) in &groups {
+                let cands = &near[a as usize * L..(a as usize + 1) * L];
+                for &r in &order[start..start + len] {
+                    let x = &rows32[r * d..(r + 1) * d];
+                    let score = |j: u32| {
+                        let c = &c32[j as usize * d..(j as usize + 1) * d];
+                        let dot: f64 = x
+                            .iter()
+                            .zip(c)
+                            .map(|(&p, &q)| f64::from(p) * f64::from(q))
+                            .sum();
+                        c_norm[j as usize] - 2.0 * dot
+                    };
+                    let best = cands
+                        .iter()
+                        .map(|&j| score(j))
+                        .fold(f64::INFINITY, f64::min);
+                    assert!(cands.contains(&got[at]), "{level:?}: row {r}");
+                    assert!(score(got[at]) <= best + 1e-4, "{level:?}: row {r}");
+                    at += 1;
+                }
+            }
+            assert_eq!(*first.get_or_insert_with(|| got.clone()), got, "{level:?}");
+        }
+        crate::set_simd_cap(None);
+    }
+
+    /// Lloyd steps, over all clusters (few clusters: the first step, the
+    /// later ones over each row's [`STEP_CANDIDATES`]) or over each row's
     /// nearest ones (more than [`LOCAL_FROM`]), never raise the objective
     /// of the bisection they start from, and lower it on rows near a
     /// curved sheet; every row is labelled.

@@ -487,7 +487,8 @@ impl ZoomOut {
             .filter(|g| sub.is_none() && g.len() == basis_b.n())
             .map(<[usize]>::to_vec);
         let mut prev_ab: Option<Vec<usize>> = None;
-        // Each direction's last fit, of the maps prev / prev_ab.
+        // Each direction's last fit, of the maps prev / prev_ab (B ← A's
+        // up to FIT_AHEAD columns ahead of k).
         let (mut fit_ab, mut fit_ba): (Option<DMatrix<f64>>, Option<DMatrix<f64>>) = (None, None);
         let mut iterations = Vec::new();
         for k in self.schedule() {
@@ -498,8 +499,18 @@ impl ZoomOut {
                 .as_ref()
                 .zip(prev.as_deref())
                 .filter(|_| !iterations.is_empty());
-            let c_ab_fit = fit(before, &t_ba, &side_a, k, &side_b, k)?;
-            let mut next = c_ab_fit.clone();
+            // With the mass, the fit runs ahead of the schedule: at up to
+            // FIT_AHEAD more rows and columns than k (the leading k x k
+            // block is the fit at k), so that its new rows and columns,
+            // a pass over every row of both shapes, are summed once per
+            // FIT_AHEAD columns instead of at every step.
+            let size = match (&side_b.fit, before) {
+                (Fit::Mass(_), Some((f, _))) if f.nrows() >= k => f.nrows(),
+                (Fit::Mass(_), _) => (k + FIT_AHEAD).min(kf),
+                _ => k,
+            };
+            let c_ab_fit = fit(before, &t_ba, &side_a, size, &side_b, size)?;
+            let mut next = c_ab_fit.view((0, 0), (k, k)).into_owned();
             fit_ab = Some(c_ab_fit);
             if self.bijective {
                 let ct = c.transpose();
@@ -628,6 +639,13 @@ pub(crate) fn image_point_map(
         .nearest(m, &queries.leading(kb), hint)
         .map_err(fmaps_solve::Error::Search)?)
 }
+
+/// Columns by which ZoomOut's fit runs ahead of the schedule (the fit at
+/// k + FIT_AHEAD holds the fit at k as its leading block, as long as the
+/// point map is the same): its border, the new rows and columns over every
+/// vertex of B, is then summed once per twenty columns, where the update
+/// over the changed rows grows only by the wider rows (docs/tuning.md).
+const FIT_AHEAD: usize = 20;
 
 /// Rows from which the balls pay (below, brute force is as fast).
 const BALLS_MIN_ROWS: usize = 1024;

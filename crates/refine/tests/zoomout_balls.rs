@@ -8,24 +8,11 @@
 //! `FMAPS_NO_AMX=1` and with `FMAPS_NO_AMX=1 FMAPS_NO_BALLS=1`, and
 //! compares the maps they print.
 
-use fmaps_mesh_io::TriMesh;
-use fmaps_mesh_io::generate::torus;
 use fmaps_refine::{Icp, Refiner, Subsample, ZoomOut};
 use nalgebra::DMatrix;
 
 mod common;
-use common::basis;
-
-/// A torus of 1800 vertices (above ZoomOut's 1024 rows for clusters),
-/// bumped by `amp`.
-fn bumpy(amp: f64) -> TriMesh {
-    let (mut v, f) = torus(2.0, 0.8, 60, 30).into_parts();
-    for (i, p) in v.iter_mut().enumerate() {
-        let s = 1.0 + amp * ((i * 31 % 17) as f64 / 17.0 - 0.5);
-        *p = [p[0] * s, p[1] * s * 1.1, p[2] * (2.0 - s)];
-    }
-    TriMesh::new(v, f).unwrap()
-}
+use common::{basis, bumpy};
 
 /// The maps of this binary's `zoomout_maps` run in a child process with
 /// `env` set.

@@ -111,21 +111,34 @@ const INNER_CHUNK: usize = 1024;
 /// output leaves a GEMM little to split otherwise; the fixed chunks keep
 /// the result independent of the thread count).
 fn inner(a: MatRef<'_, f64>, b: MatRef<'_, f64>) -> DMatrix<f64> {
-    let (n, p, q) = (a.nrows(), a.ncols(), b.ncols());
+    inner_by_chunks(a.nrows(), a.ncols(), b.ncols(), |r0, rows, part| {
+        matmul(
+            part,
+            Accum::Replace,
+            a.subrows(r0, rows).transpose(),
+            b.subrows(r0, rows),
+            1.0,
+            Par::Seq,
+        );
+    })
+}
+
+/// The sum `Σ_i a_iᵀ b_i` (p x q) over `n` rows taken in fixed chunks of
+/// [`INNER_CHUNK`] (in parallel, the partial products then summed in
+/// order: the same bits for any thread count); `product(r0, rows, part)`
+/// writes rows `r0..r0 + rows`'s `aᵀ b` into `part`.
+fn inner_by_chunks(
+    n: usize,
+    p: usize,
+    q: usize,
+    product: impl Fn(usize, usize, MatMut<'_, f64>) + Sync,
+) -> DMatrix<f64> {
     let starts: Vec<usize> = (0..n).step_by(INNER_CHUNK).collect();
     let parts: Vec<Mat<f64>> = starts
         .par_iter()
         .map(|&r0| {
-            let rows = INNER_CHUNK.min(n - r0);
             let mut part = Mat::<f64>::zeros(p, q);
-            matmul(
-                part.as_mut(),
-                Accum::Replace,
-                a.subrows(r0, rows).transpose(),
-                b.subrows(r0, rows),
-                1.0,
-                Par::Seq,
-            );
+            product(r0, INNER_CHUNK.min(n - r0), part.as_mut());
             part
         })
         .collect();
@@ -364,18 +377,27 @@ pub fn pullback_update(
     if !changed.is_empty() && kbp > 0 && kap > 0 {
         // Σ over changed y of m_y Φ_B(y)ᵀ (Φ_A(t(y)) − Φ_A(t_prev(y))).
         let nc = changed.len();
-        // (Filled row by row: no zeroing first.)
-        let mut d = Vec::with_capacity(nc * kap);
-        let mut rows_b = Vec::with_capacity(nc * kbp);
-        for &y in &changed {
-            let (new, old) = (phi_a.row(t_ba[y], kap), phi_a.row(t_prev[y], kap));
-            d.extend(new.iter().zip(old).map(|(&p, &q)| mass_b[y] * (p - q)));
-            rows_b.extend_from_slice(phi_b.row(y, kbp));
-        }
-        let delta = inner(
-            MatRef::from_row_major_slice(&rows_b, nc, kbp),
-            MatRef::from_row_major_slice(&d, nc, kap),
-        );
+        // Each chunk's rows gathered just before their product (still in
+        // cache for it).
+        let delta = inner_by_chunks(nc, kbp, kap, |r0, rows, part| {
+            let ys = &changed[r0..r0 + rows];
+            // (Filled row by row: no zeroing first.)
+            let mut d = Vec::with_capacity(rows * kap);
+            let mut rows_b = Vec::with_capacity(rows * kbp);
+            for &y in ys {
+                let (new, old) = (phi_a.row(t_ba[y], kap), phi_a.row(t_prev[y], kap));
+                d.extend(new.iter().zip(old).map(|(&p, &q)| mass_b[y] * (p - q)));
+                rows_b.extend_from_slice(phi_b.row(y, kbp));
+            }
+            matmul(
+                part,
+                Accum::Replace,
+                MatRef::from_row_major_slice(&rows_b, rows, kbp).transpose(),
+                MatRef::from_row_major_slice(&d, rows, kap),
+                1.0,
+                Par::Seq,
+            );
+        });
         let mut old = c.view_mut((0, 0), (kbp, kap));
         old += delta;
     }
