@@ -320,7 +320,7 @@ impl Partition {
     /// at most `size`, then `steps` Lloyd steps (each row to its nearest
     /// cluster mean: in the first step among all of them, by one f32 GEMM
     /// per block of rows; in the later ones among the means nearest its
-    /// own cluster's, [`STEP_CANDIDATES`] of them). Bisection alone
+    /// own cluster's, sixteen of them). Bisection alone
     /// gives elongated clusters; a few Lloyd steps make them round, which
     /// is what bounding balls need (on FAUST's spectral embeddings, five
     /// steps cut the rows a query visits 3-6x).
