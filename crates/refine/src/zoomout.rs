@@ -640,11 +640,11 @@ pub(crate) fn image_point_map(
         .map_err(fmaps_solve::Error::Search)?)
 }
 
-/// Columns by which ZoomOut's fit runs ahead of the schedule (the fit at
-/// k + FIT_AHEAD holds the fit at k as its leading block, as long as the
-/// point map is the same): its border, the new rows and columns over every
-/// vertex of B, is then summed once per twenty columns, where the update
-/// over the changed rows grows only by the wider rows (docs/tuning.md).
+/// Columns by which ZoomOut's fit runs ahead of the schedule (the leading
+/// k x k block of a point map's fit at k + FIT_AHEAD is its fit at k): its
+/// border, the new rows and columns over every vertex of B, is then
+/// summed once per twenty columns, where the update over the changed rows
+/// grows only by the wider rows (docs/tuning.md).
 const FIT_AHEAD: usize = 20;
 
 /// Rows from which the balls pay (below, brute force is as fast).
