@@ -144,6 +144,29 @@ crate::cpu::dispatched! {
     }
 }
 
+/// [`Partition::groups`] of the labels `labels`.
+fn groups_of(labels: &[u32]) -> (Vec<usize>, Vec<(usize, usize)>) {
+    let m = labels.iter().map(|&l| l as usize + 1).max().unwrap_or(0);
+    let mut count = vec![0usize; m + 1];
+    for &l in labels {
+        count[l as usize + 1] += 1;
+    }
+    for j in 0..m {
+        count[j + 1] += count[j];
+    }
+    let mut order = vec![0usize; labels.len()];
+    let mut next = count.clone();
+    for (i, &l) in labels.iter().enumerate() {
+        order[next[l as usize]] = i;
+        next[l as usize] += 1;
+    }
+    let ranges = (0..m)
+        .filter(|&j| count[j + 1] > count[j])
+        .map(|j| (count[j], count[j + 1] - count[j]))
+        .collect();
+    (order, ranges)
+}
+
 /// For each of the `m` centres (row-major, `d` wide, squared norms
 /// `c_norm`), the `nb` nearest centres (itself first: distance 0), by
 /// blocked GEMMs.
@@ -432,10 +455,7 @@ impl Partition {
                 if near.is_empty() {
                     near = nearest_centres(&centers, &c_norm, d, STEP_CANDIDATES);
                 }
-                let (order, ranges) = Partition {
-                    labels: labels.clone(),
-                }
-                .groups();
+                let (order, ranges) = groups_of(&labels);
                 let groups: Vec<(usize, usize, u32)> = ranges
                     .iter()
                     .map(|&(start, len)| (start, len, labels[order[start]]))
@@ -485,30 +505,7 @@ impl Partition {
     /// ascending within each; empty clusters left out) and each
     /// non-empty cluster's (start, len).
     pub(crate) fn groups(&self) -> (Vec<usize>, Vec<(usize, usize)>) {
-        let m = self
-            .labels
-            .iter()
-            .map(|&l| l as usize + 1)
-            .max()
-            .unwrap_or(0);
-        let mut count = vec![0usize; m + 1];
-        for &l in &self.labels {
-            count[l as usize + 1] += 1;
-        }
-        for j in 0..m {
-            count[j + 1] += count[j];
-        }
-        let mut order = vec![0usize; self.labels.len()];
-        let mut next = count.clone();
-        for (i, &l) in self.labels.iter().enumerate() {
-            order[next[l as usize]] = i;
-            next[l as usize] += 1;
-        }
-        let ranges = (0..m)
-            .filter(|&j| count[j + 1] > count[j])
-            .map(|j| (count[j], count[j + 1] - count[j]))
-            .collect();
-        (order, ranges)
+        groups_of(&self.labels)
     }
 }
 
