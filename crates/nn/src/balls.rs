@@ -424,8 +424,11 @@ struct BallWork {
     /// and the candidates (to reset their slots).
     slot: Vec<u32>,
     cands: Vec<u32>,
-    /// The candidate balls' directions (row-major, `TANGENT` rows each).
+    /// The candidate balls' directions (row-major, `TANGENT` rows each),
+    /// and their data for the AVX-512 filter.
     ut: Vec<f32>,
+    #[cfg(target_arch = "x86_64")]
+    slots: SlotData,
     /// Their dot products with the block's queries (one column per query).
     tq: Mat<f32>,
     /// Per query: |q|², the best (distance², original index) so far.
@@ -478,6 +481,8 @@ impl BallWork {
             cands: Vec::new(),
             slot: vec![u32::MAX; m],
             ut: Vec::new(),
+            #[cfg(target_arch = "x86_64")]
+            slots: SlotData::default(),
             tq: Mat::zeros(0, 0),
             qn: vec![0.0; QUERY_BLOCK],
             q_err: vec![0.0; QUERY_BLOCK],
@@ -590,7 +595,8 @@ crate::cpu::dispatched! {
         }
         work.p_start.push(p_len);
         // The candidate balls (those that pass for some query): their
-        // directions against every query of the block.
+        // directions against every query of the block, and for the
+        // AVX-512 filter their data in slot order.
         work.ut.clear();
         work.cands.clear();
         for &j in &work.p_list[..p_len] {
@@ -603,6 +609,10 @@ crate::cpu::dispatched! {
             }
         }
         let n_cand = work.cands.len();
+        #[cfg(target_arch = "x86_64")]
+        if v4 {
+            work.slots.fill(this, &work.cands);
+        }
         if work.tq.nrows() < n_cand * TANGENT || work.tq.ncols() < len {
             // (Room for every ball: allocated once, not regrown.)
             work.tq = Mat::zeros(m.max(n_cand) * TANGENT, QUERY_BLOCK);
@@ -626,7 +636,8 @@ crate::cpu::dispatched! {
             work.tangents.clear();
             // The balls that may pass the tangent bound: all that passed the
             // plain one, or those the AVX-512 filter keeps (a superset of
-            // those the bound below keeps).
+            // those the bound below keeps; in slot order, which does not
+            // matter: the visits are sorted by bound, then ball).
             let passed = work.p_start[i]..work.p_start[i + 1];
             #[cfg(target_arch = "x86_64")]
             let kept = if v4 {
@@ -637,11 +648,13 @@ crate::cpu::dispatched! {
                     t_err: work.t_err[i],
                     sl,
                 };
-                let keep = &mut work.keep[..passed.len() + PAD];
-                // SAFETY: x86-64-v4 (checked above); the passing balls are
-                // below m (`slot`, `g`), their slots within `tcol`.
+                work.slots.set_passed(&work.p_list[passed], &work.slot);
+                let keep = &mut work.keep[..n_cand + PAD];
+                // SAFETY: x86-64-v4 (checked above); the candidates are
+                // below m (`g`), `slots` holds their data, `tcol` their
+                // TANGENT n_cand products.
                 let n = unsafe {
-                    tangent_filter_avx512(this, &work.p_list[passed.clone()], &work.slot, tcol, g, q, best.0, keep)
+                    tangent_filter_avx512(&work.slots, this.geo.eta, &work.cands, tcol, g, q, best.0, keep)
                 };
                 &work.keep[..n]
             } else {
@@ -767,7 +780,7 @@ use geometry::{Geometry, geometry};
 #[path = "balls_bound.rs"]
 mod bound;
 #[cfg(target_arch = "x86_64")]
-use bound::{BoundQuery, tangent_filter_avx512};
+use bound::{BoundQuery, SlotData, tangent_filter_avx512};
 use bound::{Err32, Tangent, tangent_bound};
 
 #[path = "balls_plain.rs"]

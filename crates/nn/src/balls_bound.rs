@@ -107,13 +107,71 @@ pub(super) struct BoundQuery {
     pub(super) sl: f64,
 }
 
-/// The balls of `list` (one query's, in order) whose [`tangent_bound`]
-/// may be at most `cutoff`, written to `keep` in order; returns how many.
-/// `slot[j]`: ball j's place among the block's candidates, whose
-/// directions' products with the query are `tcol` (`TANGENT` per slot);
-/// `g[j]`: the query's product with ball j's centre.
+/// The per-ball data of [`tangent_bound`] for a block's candidate balls,
+/// in their slot order, one field after another (`n` entries each): the
+/// AVX-512 filter reads eight slots with plain loads, where its gathers
+/// by ball index (nineteen per eight balls) were the slow part on AMD
+/// Zen 4 (docs/tuning.md).
+#[cfg(target_arch = "x86_64")]
+#[derive(Default)]
+pub(super) struct SlotData {
+    v: Vec<f64>,
+    n: usize,
+    /// The slots of one query's plain-test survivors (a bit per slot).
+    passed: Vec<u64>,
+}
+
+/// Fields of [`SlotData`]: `c_len`, `c_norm`, `c_err`, `r_perp`, `radii`,
+/// then `TANGENT` each of `uc`, `box_lo` and `box_hi`.
+#[cfg(target_arch = "x86_64")]
+const FIELDS: usize = 5 + 3 * TANGENT;
+
+#[cfg(target_arch = "x86_64")]
+impl SlotData {
+    /// The data of the balls `cands` (slot s: ball `cands[s]`).
+    pub(super) fn fill(&mut self, this: &BallData, cands: &[u32]) {
+        let geo = &this.geo;
+        self.n = cands.len();
+        self.v.clear();
+        for a in [
+            &this.c_len,
+            &this.c_norm,
+            &this.c_err,
+            &geo.r_perp,
+            &geo.radii,
+        ] {
+            self.v.extend(cands.iter().map(|&j| a[j as usize]));
+        }
+        for a in [&geo.uc, &geo.box_lo, &geo.box_hi] {
+            for t in 0..TANGENT {
+                self.v
+                    .extend(cands.iter().map(|&j| a[j as usize * TANGENT + t]));
+            }
+        }
+    }
+
+    /// The balls `list` (one query's plain-test survivors, all among the
+    /// candidates: `slot[j]` their slots) as the set the filter reads.
+    pub(super) fn set_passed(&mut self, list: &[u32], slot: &[u32]) {
+        self.passed.clear();
+        self.passed.resize(self.n.div_ceil(64), 0);
+        for &j in list {
+            let s = slot[j as usize] as usize;
+            self.passed[s / 64] |= 1 << (s % 64);
+        }
+    }
+}
+
+/// The candidate balls (`cands`, in slot order) among those set by
+/// [`SlotData::set_passed`] (one query's plain-test survivors) whose
+/// [`tangent_bound`] may be at most `cutoff`, written to `keep` in slot
+/// order; returns how many. `slots`: the candidates' data
+/// ([`SlotData::fill`] of `cands`); `tcol`: the query's products with
+/// their directions (`TANGENT` per slot, in slot order); `g[j]`: the
+/// query's product with ball j's centre; `eta`: the directions' departure
+/// from orthonormality.
 ///
-/// Eight balls at a time, with the scalar bound's operations in its
+/// Eight slots at a time, with the scalar bound's operations in its
 /// order (no fused multiply-adds), so the bounds are the same; a ball is
 /// dropped only when its bound exceeds `cutoff` by a relative 2⁻⁴⁰ (far
 /// more than any rounding), so every ball the scalar bound keeps is kept
@@ -123,16 +181,17 @@ pub(super) struct BoundQuery {
 /// # Safety
 ///
 /// The CPU must have AVX-512 F and VL, and POPCNT (x86-64-v4). Every
-/// ball of `list` must be below `g.len()` and `slot.len()`, with a slot
-/// whose products lie in `tcol`; `keep` must hold `list.len() + 8`
-/// entries (whole vectors of eight are stored).
+/// ball of `cands` must be below `g.len()`; `slots` must hold the data of
+/// `cands`, `tcol` `TANGENT` products per slot;
+/// `keep` must hold `cands.len() + 8` entries (whole vectors of eight are
+/// stored).
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx512f,avx512bw,avx512vl,avx2,fma,popcnt")]
 #[allow(clippy::too_many_arguments)]
 pub(super) unsafe fn tangent_filter_avx512(
-    this: &BallData,
-    list: &[u32],
-    slot: &[u32],
+    slots: &SlotData,
+    eta: f64,
+    cands: &[u32],
     tcol: &[f32],
     g: &[f32],
     q: BoundQuery,
@@ -140,12 +199,21 @@ pub(super) unsafe fn tangent_filter_avx512(
     keep: &mut [u32],
 ) -> usize {
     use std::arch::x86_64::*;
+    const {
+        assert!(
+            TANGENT * 8 <= 32,
+            "one slot chunk's products fit two vectors"
+        )
+    };
+    let nc = cands.len();
     assert!(
-        keep.len() >= list.len() + 8,
-        "`keep` has no room for whole vectors"
+        slots.n == nc
+            && slots.v.len() == FIELDS * nc
+            && tcol.len() >= TANGENT * nc
+            && slots.passed.len() * 64 >= nc
+            && keep.len() >= nc + 8,
+        "the candidates' data, products, bits or room for whole vectors fall short"
     );
-    let geo = &this.geo;
-    let eta = geo.eta;
     let sl = q.sl;
     let v = _mm512_set1_pd;
     let (zero, two) = (_mm512_setzero_pd(), v(2.0));
@@ -158,66 +226,73 @@ pub(super) unsafe fn tangent_filter_avx512(
     );
     let tiny = v(f64::MIN_POSITIVE);
     let bar = v(cutoff * (1.0 + 2f64.powi(-40)) + f64::MIN_POSITIVE);
+    let lanes = _mm512_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
     let mut n = 0;
     let mut k = 0;
-    while k < list.len() {
-        let left = list.len() - k;
-        let valid: __mmask8 = if left >= 8 { 0xff } else { (1u8 << left) - 1 };
-        // SAFETY (all loads and gathers below): lanes outside `valid` are
-        // neither loaded nor gathered; the balls of `list` index every
-        // per-ball array (m entries, TANGENT per ball for the boxes), their
-        // slots `tcol` (the caller's contract).
-        let (eps, gap2, t2, v2_lo, r_perp, radii) = unsafe {
-            let j = _mm256_maskz_loadu_epi32(valid, list.as_ptr().add(k).cast());
-            let z = _mm256_setzero_si256();
-            let gd = |a: &[f64]| _mm512_mask_i32gather_pd::<8>(zero, valid, j, a.as_ptr().cast());
-            let c_len = gd(&this.c_len);
+    while k < nc {
+        let left = nc - k;
+        let tail: u8 = if left >= 8 { 0xff } else { (1u8 << left) - 1 };
+        // (k is a multiple of 8: its eight bits lie in one word.)
+        let valid: __mmask8 = tail & (slots.passed[k / 64] >> (k % 64)) as u8;
+        if valid == 0 {
+            k += 8;
+            continue;
+        }
+        // SAFETY (all loads and the gather below): lanes outside `valid`
+        // are neither loaded nor gathered; `valid` lies within slots
+        // k..min(k + 8, nc); every field of `slots` holds nc entries,
+        // `tcol` TANGENT nc (the products' loads are masked to them); the
+        // candidates index `g`.
+        // (TANGENT x 8 = 24 ≤ 32 floats: `lo` and `hi` hold them all.)
+        let (j, eps, gap2, t2, v2_lo, r_perp, radii) = unsafe {
+            let field = |f: usize| _mm512_maskz_loadu_pd(valid, slots.v.as_ptr().add(f * nc + k));
+            let j = _mm256_maskz_loadu_epi32(valid, cands.as_ptr().add(k).cast());
             let eps = _mm512_add_pd(
-                _mm512_add_pd(_mm512_mul_pd(sl_v, _mm512_add_pd(q_norm, c_len)), t_err),
+                _mm512_add_pd(_mm512_mul_pd(sl_v, _mm512_add_pd(q_norm, field(0))), t_err),
                 tiny,
             );
-            // (Each ball and slot has TANGENT entries.)
-            let per = _mm256_set1_epi32(TANGENT as i32);
-            let s_idx = _mm256_mullo_epi32(
-                _mm256_mmask_i32gather_epi32::<4>(z, valid, j, slot.as_ptr().cast()),
-                per,
+            // The products of slots k..k + 8, TANGENT each (24 floats,
+            // none read past the candidates'), split by direction below.
+            let left = TANGENT * (nc - k);
+            let (lo, hi) = (
+                _mm512_maskz_loadu_ps(low_bits16(left), tcol.as_ptr().add(TANGENT * k)),
+                _mm512_maskz_loadu_ps(
+                    low_bits16(left.saturating_sub(16)),
+                    tcol.as_ptr().add(TANGENT * k + 16),
+                ),
             );
-            let j4 = _mm256_mullo_epi32(j, per);
             let (mut gap2, mut t2) = (zero, zero);
             for t in 0..TANGENT {
-                let tt = _mm256_set1_epi32(t as i32);
-                let (ji, si) = (_mm256_add_epi32(j4, tt), _mm256_add_epi32(s_idx, tt));
-                let uq = _mm512_cvtps_pd(_mm256_mmask_i32gather_ps::<4>(
-                    _mm256_setzero_ps(),
-                    valid,
-                    si,
-                    tcol.as_ptr().cast(),
-                ));
-                let gt =
-                    |a: &[f64]| _mm512_mask_i32gather_pd::<8>(zero, valid, ji, a.as_ptr().cast());
-                let ti = _mm512_sub_pd(uq, gt(&geo.uc));
+                // Lane i: float TANGENT i + t of the 24 (16 on: of `hi`).
+                let at = _mm512_add_epi32(
+                    _mm512_mullo_epi32(lanes, _mm512_set1_epi32(TANGENT as i32)),
+                    _mm512_set1_epi32(t as i32),
+                );
+                let uq =
+                    _mm512_cvtps_pd(_mm512_castps512_ps256(_mm512_permutex2var_ps(lo, at, hi)));
+                let ti = _mm512_sub_pd(uq, field(5 + t));
                 t2 = _mm512_add_pd(t2, _mm512_mul_pd(ti, ti));
                 let out = _mm512_max_pd(
-                    _mm512_sub_pd(gt(&geo.box_lo), ti),
-                    _mm512_sub_pd(ti, gt(&geo.box_hi)),
+                    _mm512_sub_pd(field(5 + TANGENT + t), ti),
+                    _mm512_sub_pd(ti, field(5 + 2 * TANGENT + t)),
                 );
                 let gg = _mm512_max_pd(_mm512_sub_pd(out, eps), zero);
                 gap2 = _mm512_add_pd(gap2, _mm512_mul_pd(gg, gg));
             }
-            let s = _mm512_add_pd(qn, gd(&this.c_norm));
+            let s = _mm512_add_pd(qn, field(1));
             let qc = _mm512_cvtps_pd(_mm256_mmask_i32gather_ps::<4>(
                 _mm256_setzero_ps(),
                 valid,
                 j,
                 g.as_ptr().cast(),
             ));
-            let err_qc = _mm512_add_pd(q_err, gd(&this.c_err));
+            let err_qc = _mm512_add_pd(q_err, field(2));
             let v2 = _mm512_sub_pd(
                 _mm512_sub_pd(s, _mm512_mul_pd(two, qc)),
                 _mm512_mul_pd(sl_v, s),
             );
             let v2_lo = _mm512_max_pd(_mm512_sub_pd(v2, err_qc), zero);
-            (eps, gap2, t2, v2_lo, gd(&geo.r_perp), gd(&geo.radii))
+            (j, eps, gap2, t2, v2_lo, field(3), field(4))
         };
         let dc_lo = _mm512_mul_pd(_mm512_sqrt_pd(v2_lo), down);
         let tn = _mm512_add_pd(_mm512_sqrt_pd(t2), _mm512_mul_pd(two, eps));
@@ -228,12 +303,11 @@ pub(super) unsafe fn tangent_filter_avx512(
         let lt = _mm512_add_pd(_mm512_mul_pd(gap2, flat), _mm512_mul_pd(pb, pb));
         let lb2 = _mm512_mul_pd(_mm512_max_pd(lt, _mm512_mul_pd(plain, plain)), keep2);
         let pass = _mm512_mask_cmp_pd_mask::<_CMP_LE_OQ>(valid, lb2, bar);
-        // The kept indices compressed in a register (merging, not
-        // zeroing) and stored whole: see `plain_pass_avx512`.
-        // SAFETY: n ≤ k < list.len(), so the eight lanes stored end
-        // before list.len() + 8 ≤ keep.len().
+        // The kept balls compressed in a register (merging, not zeroing)
+        // and stored whole: see `plain_pass_avx512`.
+        // SAFETY: n ≤ k < nc, so the eight lanes stored end before
+        // nc + 8 ≤ keep.len().
         unsafe {
-            let j = _mm256_maskz_loadu_epi32(valid, list.as_ptr().add(k).cast());
             _mm256_storeu_si256(
                 keep.as_mut_ptr().add(n).cast(),
                 _mm256_mask_compress_epi32(j, pass, j),
@@ -243,4 +317,11 @@ pub(super) unsafe fn tangent_filter_avx512(
         k += 8;
     }
     n
+}
+
+/// The mask of the lowest `n` of sixteen lanes.
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+fn low_bits16(n: usize) -> u16 {
+    if n >= 16 { u16::MAX } else { (1u16 << n) - 1 }
 }
