@@ -108,7 +108,8 @@ pub(super) struct BoundQuery {
 }
 
 /// The per-ball data of [`tangent_bound`] for a block's candidate balls,
-/// in their slot order, one field after another (`n` entries each): the
+/// in their slot order, one field after another (one entry per
+/// candidate each): the
 /// AVX-512 filter reads eight slots with plain loads, where its gathers
 /// by ball index (nineteen per eight balls) were the slow part on AMD
 /// Zen 4 (docs/tuning.md).
@@ -116,7 +117,6 @@ pub(super) struct BoundQuery {
 #[derive(Default)]
 pub(super) struct SlotData {
     v: Vec<f64>,
-    n: usize,
     /// The slots of one query's plain-test survivors (a bit per slot).
     passed: Vec<u64>,
 }
@@ -131,7 +131,6 @@ impl SlotData {
     /// The data of the balls `cands` (slot s: ball `cands[s]`).
     pub(super) fn fill(&mut self, this: &BallData, cands: &[u32]) {
         let geo = &this.geo;
-        self.n = cands.len();
         self.v.clear();
         for a in [
             &this.c_len,
@@ -154,7 +153,7 @@ impl SlotData {
     /// candidates: `slot[j]` their slots) as the set the filter reads.
     pub(super) fn set_passed(&mut self, list: &[u32], slot: &[u32]) {
         self.passed.clear();
-        self.passed.resize(self.n.div_ceil(64), 0);
+        self.passed.resize((self.v.len() / FIELDS).div_ceil(64), 0);
         for &j in list {
             let s = slot[j as usize] as usize;
             self.passed[s / 64] |= 1 << (s % 64);
@@ -207,8 +206,7 @@ pub(super) unsafe fn tangent_filter_avx512(
     };
     let nc = cands.len();
     assert!(
-        slots.n == nc
-            && slots.v.len() == FIELDS * nc
+        slots.v.len() == FIELDS * nc
             && tcol.len() >= TANGENT * nc
             && slots.passed.len() * 64 >= nc
             && keep.len() >= nc + 8,
@@ -226,7 +224,15 @@ pub(super) unsafe fn tangent_filter_avx512(
     );
     let tiny = v(f64::MIN_POSITIVE);
     let bar = v(cutoff * (1.0 + 2f64.powi(-40)) + f64::MIN_POSITIVE);
+    // Per direction t, lane i picks float TANGENT i + t of a chunk's 24
+    // products (16 on: of the second vector).
     let lanes = _mm512_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
+    let picks: [__m512i; TANGENT] = std::array::from_fn(|t| {
+        _mm512_add_epi32(
+            _mm512_mullo_epi32(lanes, _mm512_set1_epi32(TANGENT as i32)),
+            _mm512_set1_epi32(t as i32),
+        )
+    });
     let mut n = 0;
     let mut k = 0;
     while k < nc {
@@ -263,13 +269,9 @@ pub(super) unsafe fn tangent_filter_avx512(
             );
             let (mut gap2, mut t2) = (zero, zero);
             for t in 0..TANGENT {
-                // Lane i: float TANGENT i + t of the 24 (16 on: of `hi`).
-                let at = _mm512_add_epi32(
-                    _mm512_mullo_epi32(lanes, _mm512_set1_epi32(TANGENT as i32)),
-                    _mm512_set1_epi32(t as i32),
-                );
-                let uq =
-                    _mm512_cvtps_pd(_mm512_castps512_ps256(_mm512_permutex2var_ps(lo, at, hi)));
+                let uq = _mm512_cvtps_pd(_mm512_castps512_ps256(_mm512_permutex2var_ps(
+                    lo, picks[t], hi,
+                )));
                 let ti = _mm512_sub_pd(uq, field(5 + t));
                 t2 = _mm512_add_pd(t2, _mm512_mul_pd(ti, ti));
                 let out = _mm512_max_pd(
