@@ -26,8 +26,10 @@
 //! bound (a search without guesses first takes for each query the nearest
 //! row of the ball whose centre is nearest; a query whose guess is out of
 //! range: the nearest cluster's farthest possible row);
-//! per block one f32 GEMM of the queries against the directions of the
-//! clusters that pass gives the tangent bounds; each query visits its
+//! the queries' f32 products with the directions of the clusters that pass
+//! give the tangent bounds (with AVX-512 only each query's own passing
+//! clusters', ball by ball; elsewhere one GEMM per block against every
+//! cluster that passes for some query); each query visits its
 //! surviving clusters nearest bound first, skips rows by their own bound,
 //! and measures the rest exactly in f64.
 //!
@@ -43,7 +45,7 @@
 //! the same f64 argmin (ties: the smallest index) as every strategy.
 
 use faer::linalg::matmul::matmul;
-use faer::{Accum, Mat, MatRef, Par};
+use faer::{Accum, MatRef, Par};
 use nalgebra::DMatrix;
 use rayon::prelude::*;
 
@@ -424,13 +426,20 @@ struct BallWork {
     /// and the candidates (to reset their slots).
     slot: Vec<u32>,
     cands: Vec<u32>,
-    /// The candidate balls' directions (row-major, `TANGENT` rows each),
-    /// and their data for the AVX-512 filter.
-    ut: Vec<f32>,
+    /// The candidate balls' data for the AVX-512 filter.
     #[cfg(target_arch = "x86_64")]
     slots: SlotData,
-    /// Their dot products with the block's queries (one column per query).
-    tq: Mat<f32>,
+    /// Their directions' products with the block's queries (`TANGENT`
+    /// per slot, query after query; with AVX-512 only those of each
+    /// query's plain-test survivors are current).
+    tq: Vec<f32>,
+    /// Per slot: the block's queries whose plain test it passed (a bit
+    /// per query).
+    #[cfg(target_arch = "x86_64")]
+    qmask: Vec<u64>,
+    /// The candidates' directions (row-major, `TANGENT` rows each) for
+    /// the GEMM off AVX-512.
+    ut: Vec<f32>,
     /// Per query: |q|², the best (distance², original index) so far.
     qn: Vec<f64>,
     q_err: Vec<f64>,
@@ -480,10 +489,12 @@ impl BallWork {
             keep: vec![0; m + PAD],
             cands: Vec::new(),
             slot: vec![u32::MAX; m],
-            ut: Vec::new(),
             #[cfg(target_arch = "x86_64")]
             slots: SlotData::default(),
-            tq: Mat::zeros(0, 0),
+            tq: Vec::new(),
+            #[cfg(target_arch = "x86_64")]
+            qmask: Vec::new(),
+            ut: Vec::new(),
             qn: vec![0.0; QUERY_BLOCK],
             q_err: vec![0.0; QUERY_BLOCK],
             t_err: vec![0.0; QUERY_BLOCK],
@@ -517,7 +528,6 @@ crate::cpu::dispatched! {
         // (Query t of the block order is row `q_map[t]` of `q_rows`.)
         let (q_rows, q_map, q32) = queries;
         let sl = slack(d);
-        let qb = MatRef::from_row_major_slice(&q32[q0 * d..(q0 + len) * d], len, d);
         // Plain loops, no closures: closures would not be compiled for the
         // instruction set this function is dispatched to.
         // Room for every query's list (grown once per thread: no zeroing
@@ -594,18 +604,14 @@ crate::cpu::dispatched! {
             p_len += n;
         }
         work.p_start.push(p_len);
-        // The candidate balls (those that pass for some query): their
-        // directions against every query of the block, and for the
-        // AVX-512 filter their data in slot order.
-        work.ut.clear();
+        // The candidate balls (those that pass for some query) in slots,
+        // and for the AVX-512 filter their data in slot order.
         work.cands.clear();
         for &j in &work.p_list[..p_len] {
             let j = j as usize;
             if work.slot[j] == u32::MAX {
                 work.slot[j] = work.cands.len() as u32;
                 work.cands.push(j as u32);
-                work.ut
-                    .extend_from_slice(&this.tangent32[j * TANGENT * d..(j + 1) * TANGENT * d]);
             }
         }
         let n_cand = work.cands.len();
@@ -613,32 +619,28 @@ crate::cpu::dispatched! {
         if v4 {
             work.slots.fill(this, &work.cands);
         }
-        if work.tq.nrows() < n_cand * TANGENT || work.tq.ncols() < len {
-            // (Room for every ball: allocated once, not regrown.)
-            work.tq = Mat::zeros(m.max(n_cand) * TANGENT, QUERY_BLOCK);
-        }
-        matmul(
-            work.tq.as_mut().submatrix_mut(0, 0, n_cand * TANGENT, len),
-            Accum::Replace,
-            MatRef::from_row_major_slice(&work.ut, n_cand * TANGENT, d),
-            qb.transpose(),
-            1.0,
-            Par::Seq,
-        );
+        // Each query's products with the candidates' directions (query
+        // i's from `i TANGENT n_cand`, `TANGENT` per slot).
+        #[cfg(target_arch = "x86_64")]
+        let sparse = v4;
+        #[cfg(not(target_arch = "x86_64"))]
+        let sparse = false;
+        let nc3 = n_cand * TANGENT;
+        direction_products(this, &q32[q0 * d..(q0 + len) * d], len, work, sparse);
         let mut out = Vec::with_capacity(len);
         for i in 0..len {
             let q = query_row(q_rows, q_map, q0 + i);
             let (qn, mut best) = (work.qn[i], work.best[i]);
             let q_norm = qn.sqrt();
             let g = &gb[i * m..(i + 1) * m];
-            let tcol = &work.tq.col_as_slice(i)[..n_cand * TANGENT];
-            work.visit.clear();
-            work.tangents.clear();
             // The balls that may pass the tangent bound: all that passed the
             // plain one, or those the AVX-512 filter keeps (a superset of
             // those the bound below keeps; in slot order, which does not
             // matter: the visits are sorted by bound, then ball).
             let passed = work.p_start[i]..work.p_start[i + 1];
+            let tcol = &work.tq[i * nc3..(i + 1) * nc3];
+            work.visit.clear();
+            work.tangents.clear();
             #[cfg(target_arch = "x86_64")]
             let kept = if v4 {
                 let q = BoundQuery {
@@ -781,7 +783,7 @@ use geometry::{Geometry, geometry};
 mod bound;
 #[cfg(target_arch = "x86_64")]
 use bound::{BoundQuery, SlotData, tangent_filter_avx512};
-use bound::{Err32, Tangent, tangent_bound};
+use bound::{Err32, Tangent, direction_products, tangent_bound};
 
 #[path = "balls_plain.rs"]
 mod plain;

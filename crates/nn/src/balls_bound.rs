@@ -4,7 +4,10 @@
 //! AVX-512 filter that computes the same bounds for eight balls at a
 //! time, so that only the balls it keeps take the scalar path.
 
-use super::{BallData, TANGENT};
+use faer::linalg::matmul::matmul;
+use faer::{Accum, MatRef, Par};
+
+use super::{BallData, BallWork, QUERY_BLOCK, TANGENT};
 
 /// A lower bound on the squared distance from `q` to every row of ball
 /// `j`, from its tangent box: with `v = q − c`, `t = Uv` and `P` the
@@ -70,6 +73,156 @@ pub(super) fn tangent_bound(
         dc_lo,
         dc_hi,
     })
+}
+
+/// The f32 products of a block's `len` queries `qb` (row-major, `d =
+/// this.d` columns) with the directions of its candidate balls
+/// (`work.cands`, in their slots) into `work.tq`: query i's from `i
+/// TANGENT n_cand`, `TANGENT` per slot. `sparse` (AVX-512 only): only
+/// the pairs whose ball passed the query's plain test (`work.p_list`), the
+/// other slots keeping stale products, which the AVX-512 filter masks
+/// out; else all of them, by one GEMM (faer's kernels dispatch on their
+/// own; per-pair products lost to it with AVX2).
+pub(super) fn direction_products(
+    this: &BallData,
+    qb: &[f32],
+    len: usize,
+    work: &mut BallWork,
+    sparse: bool,
+) {
+    let (d, n_cand) = (this.d, work.cands.len());
+    let nc3 = n_cand * TANGENT;
+    if work.tq.len() < nc3 * len {
+        // (Room for every ball: allocated once, not regrown.)
+        work.tq = vec![0.0; this.ranges.len().max(n_cand) * TANGENT * QUERY_BLOCK];
+    }
+    #[cfg(target_arch = "x86_64")]
+    if sparse {
+        // Per slot, its queries' bits.
+        const { assert!(QUERY_BLOCK <= 64, "a block's queries fit a word") };
+        work.qmask.clear();
+        work.qmask.resize(n_cand, 0);
+        for i in 0..len {
+            for &j in &work.p_list[work.p_start[i]..work.p_start[i + 1]] {
+                work.qmask[work.slot[j as usize] as usize] |= 1 << i;
+            }
+        }
+        // SAFETY: `sparse` only with x86-64-v4 (the caller's check).
+        unsafe {
+            tangent_products_avx512(
+                &this.tangent32,
+                qb,
+                d,
+                &work.cands,
+                &work.qmask,
+                &mut work.tq,
+            )
+        };
+        return;
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    let _ = sparse;
+    work.ut.clear();
+    for &j in &work.cands {
+        let j = j as usize;
+        work.ut
+            .extend_from_slice(&this.tangent32[j * TANGENT * d..(j + 1) * TANGENT * d]);
+    }
+    matmul(
+        faer::MatMut::from_column_major_slice_mut(&mut work.tq[..nc3 * len], nc3, len),
+        Accum::Replace,
+        MatRef::from_row_major_slice(&work.ut, nc3, d),
+        MatRef::from_row_major_slice(qb, len, d).transpose(),
+        1.0,
+        Par::Seq,
+    );
+}
+
+/// The f32 products of a block's queries (`q`: row-major, `d`
+/// columns) with the candidate balls `cands` (directions `tangent`,
+/// `TANGENT x d` per ball), only for the pairs that passed the plain
+/// test: slot s's queries are the bits of `qmask[s]`. Query i's products
+/// with slot s go to `out[i nc3 + TANGENT s..][..TANGENT]` (`nc3` =
+/// `TANGENT cands.len()`). Their error is within the GEMM's bound
+/// (`score_err`: a length-d f32 dot product in any order). Ball by ball (its directions stay in L1), four
+/// of its queries at a time (twelve independent chains of fused
+/// multiply-adds: fewer roundings than the bound allows for).
+///
+/// # Safety
+///
+/// The CPU must have AVX-512 F (and FMA).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f,avx512vl,avx2,fma,bmi1")]
+unsafe fn tangent_products_avx512(
+    tangent: &[f32],
+    q: &[f32],
+    d: usize,
+    cands: &[u32],
+    qmask: &[u64],
+    out: &mut [f32],
+) {
+    use std::arch::x86_64::*;
+    const G: usize = 4;
+    let nc3 = TANGENT * cands.len();
+    let whole = d - d % 16;
+    let tail: __mmask16 = ((1u32 << (d % 16)) - 1) as __mmask16;
+    for (s, (&j, &mask)) in cands.iter().zip(qmask).enumerate() {
+        let u = &tangent[j as usize * TANGENT * d..(j as usize + 1) * TANGENT * d];
+        let mut bits = mask;
+        while bits != 0 {
+            // Up to G of the ball's queries (the first repeated to fill).
+            let mut at = [0usize; G];
+            for g in 0..G {
+                at[g] = if bits != 0 {
+                    bits.trailing_zeros() as usize
+                } else {
+                    at[0]
+                };
+                bits &= bits.wrapping_sub(1);
+            }
+            for &i in &at {
+                assert!(
+                    (i + 1) * d <= q.len() && i * nc3 + TANGENT * (s + 1) <= out.len(),
+                    "a query past the block or its products"
+                );
+            }
+            let mut acc = [[_mm512_setzero_ps(); TANGENT]; G];
+            // SAFETY: every load lies within a query's row (checked
+            // above) or the ball's directions `u` (3 d floats): whole
+            // chunks below `whole`, then the tail masked to d.
+            unsafe {
+                let up = u.as_ptr();
+                let qp: [*const f32; G] = std::array::from_fn(|g| q.as_ptr().add(at[g] * d));
+                let mut c = 0;
+                while c < whole {
+                    let ut: [__m512; TANGENT] =
+                        std::array::from_fn(|t| _mm512_loadu_ps(up.add(t * d + c)));
+                    for g in 0..G {
+                        let qc = _mm512_loadu_ps(qp[g].add(c));
+                        for t in 0..TANGENT {
+                            acc[g][t] = _mm512_fmadd_ps(ut[t], qc, acc[g][t]);
+                        }
+                    }
+                    c += 16;
+                }
+                if tail != 0 {
+                    let ut: [__m512; TANGENT] =
+                        std::array::from_fn(|t| _mm512_maskz_loadu_ps(tail, up.add(t * d + c)));
+                    for g in 0..G {
+                        let qc = _mm512_maskz_loadu_ps(tail, qp[g].add(c));
+                        for t in 0..TANGENT {
+                            acc[g][t] = _mm512_fmadd_ps(ut[t], qc, acc[g][t]);
+                        }
+                    }
+                }
+            }
+            for g in 0..G {
+                for t in 0..TANGENT {
+                    out[at[g] * nc3 + TANGENT * s + t] = _mm512_reduce_add_ps(acc[g][t]);
+                }
+            }
+        }
+    }
 }
 
 /// Bounds on the errors of [`tangent_bound`]'s inputs computed in f32:
