@@ -163,6 +163,7 @@ unsafe fn tangent_products_avx512(
 ) {
     use std::arch::x86_64::*;
     const G: usize = 4;
+    const { assert!(TANGENT == 3, "three products per query fit a 128-bit lane") };
     let nc3 = TANGENT * cands.len();
     let whole = d - d % 16;
     let tail: __mmask16 = ((1u32 << (d % 16)) - 1) as __mmask16;
@@ -216,10 +217,42 @@ unsafe fn tangent_products_avx512(
                     }
                 }
             }
+            // The twelve sums at once: per direction t, the four queries'
+            // accumulators folded to one vector whose 128-bit lane g holds
+            // four partial sums of query g's; then within the lanes, so
+            // that lane g ends as query g's three products (and a copy).
+            let fold: [__m512; TANGENT] = std::array::from_fn(|t| {
+                let pair = |a: __m512, b: __m512| {
+                    _mm512_add_ps(
+                        _mm512_shuffle_f32x4::<0x44>(a, b),
+                        _mm512_shuffle_f32x4::<0xEE>(a, b),
+                    )
+                };
+                let (ab, cd) = (pair(acc[0][t], acc[1][t]), pair(acc[2][t], acc[3][t]));
+                _mm512_add_ps(
+                    _mm512_shuffle_f32x4::<0x88>(ab, cd),
+                    _mm512_shuffle_f32x4::<0xDD>(ab, cd),
+                )
+            });
+            let half = |a: __m512, b: __m512| {
+                _mm512_add_ps(
+                    _mm512_shuffle_ps::<0x88>(a, b),
+                    _mm512_shuffle_ps::<0xDD>(a, b),
+                )
+            };
+            let (p, r) = (half(fold[0], fold[1]), half(fold[2], fold[2]));
+            let sums = half(p, r);
+            let lanes = [
+                _mm512_castps512_ps128(sums),
+                _mm512_extractf32x4_ps::<1>(sums),
+                _mm512_extractf32x4_ps::<2>(sums),
+                _mm512_extractf32x4_ps::<3>(sums),
+            ];
             for g in 0..G {
-                for t in 0..TANGENT {
-                    out[at[g] * nc3 + TANGENT * s + t] = _mm512_reduce_add_ps(acc[g][t]);
-                }
+                let o = at[g] * nc3 + TANGENT * s;
+                // SAFETY: the three floats from `o` lie within `out`
+                // (checked above).
+                unsafe { _mm_mask_storeu_ps(out.as_mut_ptr().add(o), 0b111, lanes[g]) };
             }
         }
     }
