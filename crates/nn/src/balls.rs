@@ -433,10 +433,6 @@ struct BallWork {
     /// per slot, query after query; with AVX-512 only those of each
     /// query's plain-test survivors are current).
     tq: Vec<f32>,
-    /// Per slot: the block's queries whose plain test it passed (a bit
-    /// per query).
-    #[cfg(target_arch = "x86_64")]
-    qmask: Vec<u64>,
     /// The candidates' directions (row-major, `TANGENT` rows each) for
     /// the GEMM off AVX-512.
     ut: Vec<f32>,
@@ -492,8 +488,6 @@ impl BallWork {
             #[cfg(target_arch = "x86_64")]
             slots: SlotData::default(),
             tq: Vec::new(),
-            #[cfg(target_arch = "x86_64")]
-            qmask: Vec::new(),
             ut: Vec::new(),
             qn: vec![0.0; QUERY_BLOCK],
             q_err: vec![0.0; QUERY_BLOCK],
@@ -644,13 +638,13 @@ crate::cpu::dispatched! {
             #[cfg(target_arch = "x86_64")]
             let kept = if v4 {
                 let q = BoundQuery {
+                    i,
                     qn,
                     q_norm,
                     q_err: work.q_err[i],
                     t_err: work.t_err[i],
                     sl,
                 };
-                work.slots.set_passed(&work.p_list[passed], &work.slot);
                 let keep = &mut work.keep[..n_cand + PAD];
                 // SAFETY: x86-64-v4 (checked above); the candidates are
                 // below m (`g`), `slots` holds their data, `tcol` their

@@ -100,11 +100,12 @@ pub(super) fn direction_products(
     if sparse {
         // Per slot, its queries' bits.
         const { assert!(QUERY_BLOCK <= 64, "a block's queries fit a word") };
-        work.qmask.clear();
-        work.qmask.resize(n_cand, 0);
+        let queries = &mut work.slots.queries;
+        queries.clear();
+        queries.resize(n_cand, 0);
         for i in 0..len {
             for &j in &work.p_list[work.p_start[i]..work.p_start[i + 1]] {
-                work.qmask[work.slot[j as usize] as usize] |= 1 << i;
+                queries[work.slot[j as usize] as usize] |= 1 << i;
             }
         }
         // SAFETY: `sparse` only with x86-64-v4 (the caller's check).
@@ -114,7 +115,7 @@ pub(super) fn direction_products(
                 qb,
                 d,
                 &work.cands,
-                &work.qmask,
+                &work.slots.queries,
                 &mut work.tq,
             )
         };
@@ -141,7 +142,7 @@ pub(super) fn direction_products(
 /// The f32 products of a block's queries (`q`: row-major, `d`
 /// columns) with the candidate balls `cands` (directions `tangent`,
 /// `TANGENT x d` per ball), only for the pairs that passed the plain
-/// test: slot s's queries are the bits of `qmask[s]`. Query i's products
+/// test: slot s's queries are the bits of `queries[s]`. Query i's products
 /// with slot s go to `out[i nc3 + TANGENT s..][..TANGENT]` (`nc3` =
 /// `TANGENT cands.len()`). Their error is within the GEMM's bound
 /// (`score_err`: a length-d f32 dot product in any order). Ball by ball (its directions stay in L1), four
@@ -158,7 +159,7 @@ unsafe fn tangent_products_avx512(
     q: &[f32],
     d: usize,
     cands: &[u32],
-    qmask: &[u64],
+    queries: &[u64],
     out: &mut [f32],
 ) {
     use std::arch::x86_64::*;
@@ -167,7 +168,7 @@ unsafe fn tangent_products_avx512(
     let nc3 = TANGENT * cands.len();
     let whole = d - d % 16;
     let tail: __mmask16 = ((1u32 << (d % 16)) - 1) as __mmask16;
-    for (s, (&j, &mask)) in cands.iter().zip(qmask).enumerate() {
+    for (s, (&j, &mask)) in cands.iter().zip(queries).enumerate() {
         let u = &tangent[j as usize * TANGENT * d..(j as usize + 1) * TANGENT * d];
         let mut bits = mask;
         while bits != 0 {
@@ -280,12 +281,15 @@ pub(super) struct Tangent {
     pub(super) dc_hi: f64,
 }
 
-/// One query's inputs of [`tangent_filter_avx512`]: `|q|²`, `|q|`, its
+/// One query's inputs of [`tangent_filter_avx512`]: its place in the
+/// block, `|q|²`, `|q|`, its
 /// shares of the f32 products' errors (with the centres, along the
 /// directions) and the slack.
 #[cfg(target_arch = "x86_64")]
 #[derive(Clone, Copy)]
 pub(super) struct BoundQuery {
+    /// The query's place in its block (its bit in `SlotData::queries`).
+    pub(super) i: usize,
     pub(super) qn: f64,
     pub(super) q_norm: f64,
     pub(super) q_err: f64,
@@ -303,8 +307,9 @@ pub(super) struct BoundQuery {
 #[derive(Default)]
 pub(super) struct SlotData {
     v: Vec<f64>,
-    /// The slots of one query's plain-test survivors (a bit per slot).
-    passed: Vec<u64>,
+    /// Per slot, the block's queries whose plain test it passed (a bit
+    /// per query).
+    pub(super) queries: Vec<u64>,
 }
 
 /// Fields of [`SlotData`]: `c_len`, `c_norm`, `c_err`, `r_perp`, `radii`,
@@ -334,21 +339,10 @@ impl SlotData {
             }
         }
     }
-
-    /// The balls `list` (one query's plain-test survivors, all among the
-    /// candidates: `slot[j]` their slots) as the set the filter reads.
-    pub(super) fn set_passed(&mut self, list: &[u32], slot: &[u32]) {
-        self.passed.clear();
-        self.passed.resize((self.v.len() / FIELDS).div_ceil(64), 0);
-        for &j in list {
-            let s = slot[j as usize] as usize;
-            self.passed[s / 64] |= 1 << (s % 64);
-        }
-    }
 }
 
-/// The candidate balls (`cands`, in slot order) among those set by
-/// [`SlotData::set_passed`] (one query's plain-test survivors) whose
+/// The candidate balls (`cands`, in slot order) that passed query `q.i`'s
+/// plain test (its bit in [`SlotData`]'s `queries`) whose
 /// [`tangent_bound`] may be at most `cutoff`, written to `keep` in slot
 /// order; returns how many. `slots`: the candidates' data
 /// ([`SlotData::fill`] of `cands`); `tcol`: the query's products with
@@ -366,8 +360,8 @@ impl SlotData {
 /// # Safety
 ///
 /// The CPU must have AVX-512 F and VL, and POPCNT (x86-64-v4). Every
-/// ball of `cands` must be below `g.len()`; `slots` must hold the data of
-/// `cands`, `tcol` `TANGENT` products per slot;
+/// ball of `cands` must be below `g.len()`; `slots` must hold the data
+/// and the queries' bits of `cands`, `tcol` `TANGENT` products per slot;
 /// `keep` must hold `cands.len() + 8` entries (whole vectors of eight are
 /// stored).
 #[cfg(target_arch = "x86_64")]
@@ -394,7 +388,8 @@ pub(super) unsafe fn tangent_filter_avx512(
     assert!(
         slots.v.len() == FIELDS * nc
             && tcol.len() >= TANGENT * nc
-            && slots.passed.len() * 64 >= nc
+            && slots.queries.len() == nc
+            && q.i < 64
             && keep.len() >= nc + 8,
         "the candidates' data, products, bits or room for whole vectors fall short"
     );
@@ -419,13 +414,18 @@ pub(super) unsafe fn tangent_filter_avx512(
             _mm512_set1_epi32(t as i32),
         )
     });
+    let qbit = _mm512_set1_epi64(1 << q.i);
     let mut n = 0;
     let mut k = 0;
     while k < nc {
         let left = nc - k;
         let tail: u8 = if left >= 8 { 0xff } else { (1u8 << left) - 1 };
-        // (k is a multiple of 8: its eight bits lie in one word.)
-        let valid: __mmask8 = tail & (slots.passed[k / 64] >> (k % 64)) as u8;
+        // The slots whose plain test query q.i passed.
+        // SAFETY: the load is masked to the candidates' slots.
+        let valid: __mmask8 = unsafe {
+            let bits = _mm512_maskz_loadu_epi64(tail, slots.queries.as_ptr().add(k).cast());
+            _mm512_mask_test_epi64_mask(tail, bits, qbit)
+        };
         if valid == 0 {
             k += 8;
             continue;
