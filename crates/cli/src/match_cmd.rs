@@ -171,7 +171,7 @@ pub(crate) struct RefinerFlags {
     /// Run the ZoomOut iterations on N farthest points per shape (the
     /// paper's fast variant; the final map covers all vertices), or on
     /// every vertex (`all`). Default: every vertex up to 20000 vertices in
-    /// the larger mesh, 5000 samples above
+    /// the larger mesh, 10000 samples above
     /// (`fmaps::pipeline::default_refine_samples`; the output says so).
     #[arg(long, value_name = "N|all", value_parser = parse_refine_samples)]
     refine_samples: Option<SamplesFlag>,

@@ -139,15 +139,16 @@ pub(super) fn direction_products(
     );
 }
 
-/// The f32 products of a block's queries (`q`: row-major, `d`
-/// columns) with the candidate balls `cands` (directions `tangent`,
-/// `TANGENT x d` per ball), only for the pairs that passed the plain
-/// test: slot s's queries are the bits of `queries[s]`. Query i's products
-/// with slot s go to `out[i nc3 + TANGENT s..][..TANGENT]` (`nc3` =
-/// `TANGENT cands.len()`). Their error is within the GEMM's bound
-/// (`score_err`: a length-d f32 dot product in any order). Ball by ball (its directions stay in L1), four
-/// of its queries at a time (twelve independent chains of fused
-/// multiply-adds: fewer roundings than the bound allows for).
+/// The f32 products of a block's queries (`q`: row-major, `d` columns)
+/// with the candidate balls `cands` (directions `tangent`, `TANGENT x d`
+/// per ball), only for the pairs that passed the plain test: slot s's
+/// queries are the bits of `queries[s]`. Query i's products with slot s
+/// go to `out[i nc3 + TANGENT s..][..TANGENT]` (`nc3` = `TANGENT
+/// cands.len()`). Their error is within the GEMM's bound (`score_err`: a
+/// length-d f32 dot product in any order, from the same f32 operands).
+/// Ball by ball (its directions stay in L1), four of its queries at a
+/// time (twelve independent chains of fused multiply-adds: fewer
+/// roundings than the bound allows for).
 ///
 /// # Safety
 ///
