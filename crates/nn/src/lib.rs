@@ -18,7 +18,8 @@
 //! that makes this cut sharp. The scans and distance kernels are compiled
 //! for AVX-512 and AVX2 as well and the widest one the CPU has is run.
 //!
-//! Without matrix tiles, where a search is repeated on linear images of
+//! Without matrix tiles (with them, from [`TILED_BALLS_FROM_ROWS`] rows),
+//! where a search is repeated on linear images of
 //! the same rows (ZoomOut's `Φ_A Cᵀ`) with guesses, clusters of the rows
 //! computed once ([`Partition`]) prune nearly everything
 //! ([`NnStrategy::Balls`]): each cluster is bounded by a ball and by a box
@@ -91,7 +92,7 @@ use std::sync::OnceLock;
 use balls::BallData;
 pub use balls::{BALL_SIZE, KMEANS_STEPS, Partition};
 use brute::{BruteData, FUSED_MAX_DIM, brute_search, max_abs, power_of_two_scale, scale_for};
-pub use partition::{BALLS_MAX_ROWS, cluster_columns, coarse_ball_size};
+pub use partition::{BALLS_MAX_ROWS, TILED_BALLS_FROM_ROWS, cluster_columns, coarse_ball_size};
 use prefix::{PREFIX_FROM, PREFIX_MAX_ROWS, PrefixData, prefix_search};
 use rows::Rows;
 use std::sync::Arc;
@@ -225,9 +226,10 @@ pub struct NnParams {
     /// it does not label every data row): computed once, e.g. for a
     /// shape's spectral embedding, and reused for every linear image of it
     /// that is searched (ZoomOut's `Φ_A Cᵀ`). With a partition,
-    /// [`NnStrategy::Auto`] runs the balls where the CPU has no matrix
-    /// tiles (with or without guesses: without, each query is first
-    /// seeded from its nearest centre's ball).
+    /// [`NnStrategy::Auto`] runs the balls in more than 32 dimensions
+    /// where the CPU has no matrix tiles, or from [`TILED_BALLS_FROM_ROWS`]
+    /// data rows where it has them (with or without guesses: without, each
+    /// query is first seeded from its nearest centre's ball).
     pub partition: Option<Arc<Partition>>,
 }
 
@@ -253,10 +255,12 @@ impl NnParams {
 /// exact answer.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum NnStrategy {
-    /// The matrix tiles from 16 dimensions where the CPU has them; else
-    /// the prefix search from 64 dimensions with guesses, the tree in 33
-    /// to 48 dimensions when both sets have 50,000 rows or more, brute
-    /// force otherwise.
+    /// With a [`Partition`] in more than 32 dimensions the ball search
+    /// (where the CPU has matrix tiles, from [`TILED_BALLS_FROM_ROWS`] data
+    /// rows); else the matrix tiles from 16 dimensions where the CPU has
+    /// them; else the prefix search from 64 dimensions with guesses, the
+    /// tree in 33 to 48 dimensions when both sets have 50,000 rows or
+    /// more, brute force otherwise.
     #[default]
     Auto,
     /// Every query against every data row (blocked f32 GEMM; up to 32
@@ -601,9 +605,11 @@ impl Searcher {
 /// The strategy [`NnStrategy::Auto`] stands for with `nx` data rows, `nq`
 /// queries of `d` coordinates (others stand for themselves). The choice
 /// follows measurements on FAUST spectral embeddings (README, "Choosing a
-/// strategy"): the tiles wherever they exist, the prefix search with
-/// guesses in high dimensions, the clusters instead where a partition is
-/// given, with or without guesses (more than 32 coordinates: below, the fused kernel), the tree
+/// strategy"): the clusters where a partition is given, with or without
+/// guesses (more than 32 coordinates: below, the fused kernel; with
+/// matrix tiles from [`TILED_BALLS_FROM_ROWS`] data rows), else the tiles
+/// wherever they exist, the prefix search with guesses in high
+/// dimensions, the tree
 /// only for very large sets in 33-48 dimensions (below 33 the fused
 /// brute-force kernel is faster at every size measured, up to 80k x 80k
 /// rows).
@@ -618,10 +624,11 @@ fn resolve(
     if strategy != NnStrategy::Auto {
         return strategy;
     }
-    if d >= TILES_FROM && tiles::available() {
-        NnStrategy::Tiles
-    } else if partitioned && d > FUSED_MAX_DIM {
+    let tiles = d >= TILES_FROM && tiles::available();
+    if partitioned && d > FUSED_MAX_DIM && (!tiles || nx >= TILED_BALLS_FROM_ROWS) {
         NnStrategy::Balls
+    } else if tiles {
+        NnStrategy::Tiles
     } else if (1024..=PREFIX_MAX_ROWS).contains(&nx) && d >= PREFIX_FROM && hinted {
         NnStrategy::Prefix
     } else if (FUSED_MAX_DIM + 1..=TREE_MAX_DIM).contains(&d)

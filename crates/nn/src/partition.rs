@@ -213,6 +213,14 @@ fn nearest_centres(centers: &[f64], c_norm: &[f64], d: usize, nb: usize) -> Vec<
 /// strategies).
 pub const BALLS_MAX_ROWS: usize = 250_000;
 
+/// Rows from which [`Partition::for_balls`] and its siblings cluster on
+/// CPUs with matrix tiles too ([`tiles_available`](crate::tiles_available)):
+/// the tiles rank every pair, so their cost grows with the square of the
+/// rows, the ball search's far less. On FAUST's spectral embeddings the
+/// tiles were faster at 5k rows for ZoomOut 50:150:5 and the balls from
+/// 10k on (docs/tuning.md, session 46; the same maps).
+pub const TILED_BALLS_FROM_ROWS: usize = 8192;
+
 /// Leading columns of `d` that [`Partition::for_balls`] clusters: half
 /// of them, at least 64 (all of them up to 64).
 pub fn cluster_columns(d: usize) -> usize {
@@ -241,10 +249,11 @@ pub fn coarse_ball_size(n: usize) -> usize {
 impl Partition {
     /// The default clusters for searching the rows `rows` (n x d) or any
     /// linear image of them with the ball search, when that is the
-    /// fastest exact search: no matrix tiles on this CPU
-    /// ([`tiles_available`](crate::tiles_available)), `min_rows..=`
-    /// [`BALLS_MAX_ROWS`] rows (below `min_rows`, which depends on the
-    /// caller's searches, the other strategies are as fast), d > 0, and
+    /// fastest exact search: `min_rows..=` [`BALLS_MAX_ROWS`] rows (below
+    /// `min_rows`, which depends on the caller's searches, the other
+    /// strategies are as fast; on CPUs with matrix tiles,
+    /// [`tiles_available`](crate::tiles_available), at least
+    /// [`TILED_BALLS_FROM_ROWS`], below which the tiles are), d > 0, and
     /// `FMAPS_NO_BALLS` unset (`FMAPS_NO_BALLS=1`: `None`, to compare; the
     /// answers are the same). [`Partition::kmeans`] with [`BALL_SIZE`](crate::BALL_SIZE)
     /// and [`KMEANS_STEPS`](crate::KMEANS_STEPS) of the leading
@@ -335,7 +344,12 @@ impl Partition {
     /// The conditions of [`for_balls`](Self::for_balls).
     fn balls_pay(n: usize, d: usize, min_rows: usize) -> bool {
         let off = std::env::var_os("FMAPS_NO_BALLS").is_some_and(|v| !v.is_empty() && v != "0");
-        !(off || crate::tiles_available() || d == 0 || !(min_rows..=BALLS_MAX_ROWS).contains(&n))
+        let min_rows = if crate::tiles_available() {
+            min_rows.max(TILED_BALLS_FROM_ROWS)
+        } else {
+            min_rows
+        };
+        !(off || d == 0 || !(min_rows..=BALLS_MAX_ROWS).contains(&n))
     }
 
     /// k-means clusters of the rows of `rows` (n x d), about `size` rows

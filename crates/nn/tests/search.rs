@@ -140,10 +140,10 @@ fn prefix_search_equals_brute_force_whatever_the_guesses() {
 
 /// The default clusters of the ball search ([`fmaps_nn::Partition::for_balls`]):
 /// none below the caller's row count, for zero columns, where matrix tiles
-/// exist, or with `FMAPS_NO_BALLS` set (not set in this test); otherwise a
-/// k-means partition of every row, the same as `Partition::kmeans` with the
-/// default sizes on the leading `cluster_columns(d)` columns (half of them,
-/// at least 64).
+/// exist below `TILED_BALLS_FROM_ROWS` rows, or with `FMAPS_NO_BALLS` set
+/// (not set in this test); otherwise a k-means partition of every row, the
+/// same as `Partition::kmeans` with the default sizes on the leading
+/// `cluster_columns(d)` columns (half of them, at least 64).
 #[test]
 fn default_ball_clusters_follow_the_policy() {
     use fmaps_nn::{BALL_SIZE, KMEANS_STEPS, Partition, tiles_available, view};
@@ -180,6 +180,22 @@ fn default_ball_clusters_follow_the_policy() {
             "the clusters of all columns differ here, so the test sees the column count"
         );
     }
+    // From TILED_BALLS_FROM_ROWS rows clusters on every CPU; one row fewer
+    // only without tiles (rows of any smooth map: the policy looks at the
+    // counts only).
+    use fmaps_nn::TILED_BALLS_FROM_ROWS;
+    let big = |n: usize| {
+        faer::Mat::<f64>::from_fn(n, 3, |i, j| ((i as f64) * 0.001 * (j + 1) as f64).sin())
+    };
+    let at = big(TILED_BALLS_FROM_ROWS);
+    let got =
+        Partition::for_balls(at.as_ref(), 1).expect("clusters from TILED_BALLS_FROM_ROWS rows");
+    assert_eq!(got.len(), TILED_BALLS_FROM_ROWS);
+    let below = big(TILED_BALLS_FROM_ROWS - 1);
+    assert_eq!(
+        Partition::for_balls(below.as_ref(), 1).is_some(),
+        !tiles_available()
+    );
 }
 
 /// The ball search on spectral embeddings, as ZoomOut runs it: the

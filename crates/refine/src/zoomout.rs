@@ -653,8 +653,9 @@ const BALLS_MIN_ROWS: usize = 1024;
 /// k-means clusters of the rows `r` (one per ~24 rows) for the ball search
 /// (`NnStrategy::Balls`: exact, and where there are no matrix tiles the
 /// fastest search of a linear image of these rows with guesses), when it
-/// pays ([`fmaps_nn::Partition::for_balls`]: no tiles, 1024-250,000 rows,
-/// `FMAPS_NO_BALLS` unset).
+/// pays ([`fmaps_nn::Partition::for_balls`]: 1024-250,000 rows, with
+/// matrix tiles from `fmaps_nn::TILED_BALLS_FROM_ROWS`, `FMAPS_NO_BALLS`
+/// unset).
 pub(crate) fn balls_partition(r: &BasisRows) -> Option<std::sync::Arc<fmaps_nn::Partition>> {
     fmaps_nn::Partition::for_balls(r.view(r.k()), BALLS_MIN_ROWS)
 }

@@ -335,8 +335,10 @@ pub(super) const HINTED_BALLS_FROM_COLS: usize = 33;
 
 /// The search among the rows `data` of a product embedding (clusters of
 /// its rows: `cells`), `hinted` when each query comes with a guess (the
-/// previous level's correspondence). Without matrix tiles the ball search
-/// (exact: the same answers as brute force), where it pays:
+/// previous level's correspondence). The ball search (exact: the same
+/// answers as brute force) where it pays (on CPUs with matrix tiles only
+/// from `fmaps_nn::TILED_BALLS_FROM_ROWS` rows, below which the tiles
+/// are faster):
 /// - with guesses from [`HINTED_BALLS_FROM_COLS`] columns, over `cells`
 ///   (the alignment levels above shell ~26 on 2000 samples: the previous
 ///   level's correspondences bound each query's search to a few clusters;
