@@ -337,14 +337,56 @@ impl Partition {
         min_rows: usize,
         labels: Vec<u32>,
     ) -> Option<Arc<Partition>> {
-        (labels.len() == rows.nrows() && Partition::balls_pay(rows.nrows(), rows.ncols(), min_rows))
-            .then(|| Partition::from_labels(labels))
+        Partition::from_labels_if(rows, min_rows, labels, crate::tiles_available())
+    }
+
+    /// [`for_balls_from_labels`](Self::for_balls_from_labels) for a caller
+    /// whose other choice is brute force without the matrix tiles
+    /// ([`NnStrategy::Brute`](crate::NnStrategy::Brute), e.g. Smooth
+    /// Shells' searches among a few thousand samples): the same conditions
+    /// on any CPU, without the tiles' row threshold
+    /// ([`TILED_BALLS_FROM_ROWS`]), which compares the balls with the tiles.
+    ///
+    /// ```
+    /// let rows = faer::Mat::<f64>::zeros(3000, 4);
+    /// let labels: Vec<u32> = (0..3000).map(|i| i / 20).collect();
+    /// let p = fmaps_nn::Partition::for_balls_over_brute_from_labels(rows.as_ref(), 1024, labels);
+    /// if std::env::var_os("FMAPS_NO_BALLS").is_none() {
+    ///     assert_eq!(p.expect("3000 rows, from 1024").labels()[45], 2);
+    /// }
+    /// ```
+    pub fn for_balls_over_brute_from_labels(
+        rows: MatRef<'_, f64>,
+        min_rows: usize,
+        labels: Vec<u32>,
+    ) -> Option<Arc<Partition>> {
+        Partition::from_labels_if(rows, min_rows, labels, false)
+    }
+
+    /// `labels` as a partition under the conditions of
+    /// [`for_balls`](Self::for_balls), `tiles` saying whether the tiles'
+    /// row threshold applies.
+    fn from_labels_if(
+        rows: MatRef<'_, f64>,
+        min_rows: usize,
+        labels: Vec<u32>,
+        tiles: bool,
+    ) -> Option<Arc<Partition>> {
+        (labels.len() == rows.nrows()
+            && Partition::balls_pay_with(rows.nrows(), rows.ncols(), min_rows, tiles))
+        .then(|| Partition::from_labels(labels))
     }
 
     /// The conditions of [`for_balls`](Self::for_balls).
     fn balls_pay(n: usize, d: usize, min_rows: usize) -> bool {
+        Partition::balls_pay_with(n, d, min_rows, crate::tiles_available())
+    }
+
+    /// The conditions of [`for_balls`](Self::for_balls), `tiles` saying
+    /// whether [`TILED_BALLS_FROM_ROWS`] applies.
+    fn balls_pay_with(n: usize, d: usize, min_rows: usize, tiles: bool) -> bool {
         let off = std::env::var_os("FMAPS_NO_BALLS").is_some_and(|v| !v.is_empty() && v != "0");
-        let min_rows = if crate::tiles_available() {
+        let min_rows = if tiles {
             min_rows.max(TILED_BALLS_FROM_ROWS)
         } else {
             min_rows

@@ -4,7 +4,7 @@
 //! [`super::arap`]).
 
 use faer::MatRef;
-use fmaps_nn::{NnParams, nearest_rows, nearest_rows_both};
+use fmaps_nn::{NnParams, Partition, nearest_rows, nearest_rows_both};
 use nalgebra::{DMatrix, Matrix3, Vector3};
 
 use super::arap::rotations;
@@ -336,9 +336,9 @@ pub(super) const HINTED_BALLS_FROM_COLS: usize = 33;
 /// The search among the rows `data` of a product embedding (clusters of
 /// its rows: `cells`), `hinted` when each query comes with a guess (the
 /// previous level's correspondence). The ball search (exact: the same
-/// answers as brute force) where it pays (on CPUs with matrix tiles only
-/// from `fmaps_nn::TILED_BALLS_FROM_ROWS` rows, below which the tiles
-/// are faster):
+/// answers as brute force) where it pays, on any CPU (the other choice is
+/// brute force without the matrix tiles: with AMX the default took 20%
+/// longer before the balls ran there too, docs/tuning.md):
 /// - with guesses from [`HINTED_BALLS_FROM_COLS`] columns, over `cells`
 ///   (the alignment levels above shell ~26 on 2000 samples: the previous
 ///   level's correspondences bound each query's search to a few clusters;
@@ -357,13 +357,13 @@ fn search_params(data: MatRef<'_, f64>, cells: Option<&[u32]>, hinted: bool) -> 
     if hinted
         && data.ncols() >= HINTED_BALLS_FROM_COLS
         && let Some(p) =
-            cells.and_then(|c| fmaps_nn::Partition::for_balls_from_labels(data, 1, c.to_vec()))
+            cells.and_then(|c| Partition::for_balls_over_brute_from_labels(data, 1, c.to_vec()))
     {
         return balls(p);
     }
     let partition = match cells {
-        Some(c) => fmaps_nn::Partition::for_balls_from_labels(data, BALLS_FROM_ROWS, c.to_vec()),
-        None => fmaps_nn::Partition::for_one_search(data, BALLS_FROM_ROWS),
+        Some(c) => Partition::for_balls_over_brute_from_labels(data, BALLS_FROM_ROWS, c.to_vec()),
+        None => Partition::for_one_search(data, BALLS_FROM_ROWS),
     };
     match partition {
         Some(p) => balls(p),

@@ -70,8 +70,10 @@ fn the_search_on_every_vertex_agrees_with_brute_force() {
         let params = search_params(data.as_ref(), cells, false);
         if params.strategy != fmaps_nn::NnStrategy::Balls {
             eprintln!(
-                "skipped: the ball search is not chosen on this CPU (matrix tiles) or with \
-                 FMAPS_NO_BALLS; brute force alone was compared with itself"
+                "skipped (cells: {}): the ball search is not chosen on this CPU (matrix tiles, \
+                 k-means clusters below TILED_BALLS_FROM_ROWS rows) or with FMAPS_NO_BALLS; \
+                 brute force alone was compared with itself",
+                cells.is_some()
             );
         }
         let got = nearest_rows(data.as_ref(), queries.as_ref(), None, &params).unwrap();
