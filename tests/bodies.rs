@@ -1,4 +1,4 @@
-//! Accuracy on small generated bodies (`fmaps_mesh_io::body`): the default
+//! Accuracy on small generated bodies (`fmaps_shapes::body`): the default
 //! ZoomOut pipeline on one body in two poses and Smooth Shells on two
 //! builds in two poses, each shape remeshed independently, against the
 //! exact template correspondence; graph
@@ -8,8 +8,8 @@
 
 use fmaps::eval::{EvalParams, GroundTruth, evaluate};
 use fmaps::geodesic::DijkstraSolver;
-use fmaps::mesh_io::body::{Body, BodyPose, Build, GeneratedShape, nearest_vertices};
 use fmaps::pipeline::{MatchParams, Refinement, ZOOMOUT_STARTS, match_shapes};
+use fmaps::shapes::body::{Body, BodyPose, Build, GeneratedShape, nearest_vertices};
 
 /// The truth of `a -> b`: each vertex of A to the vertex of B nearest to
 /// it on the template.

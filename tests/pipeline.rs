@@ -1,8 +1,8 @@
 //! The matching pipeline on generated shapes with known correspondence.
 
 use fmaps::mesh_io::TriMesh;
-use fmaps::mesh_io::generate::icosphere;
 use fmaps::pipeline::{MatchError, MatchParams, Refinement, StartSelection, match_shapes};
+use fmaps::shapes::icosphere;
 
 /// An ellipsoid with two off-axis bumps: no symmetry left.
 fn blob() -> TriMesh {
@@ -308,7 +308,7 @@ fn select_at_keeps_the_best_start_at_the_stop_and_finishes_only_it() {
 /// eigenvalues).
 #[test]
 fn the_map_does_not_depend_on_the_units() {
-    let pair = fmaps::mesh_io::generate::creature_pair(3);
+    let pair = fmaps::shapes::creature_pair(3);
     let (a, b) = (&pair.source, &pair.target);
     let params = MatchParams {
         k_process: 60,
@@ -348,8 +348,8 @@ fn the_map_does_not_depend_on_the_units() {
 
 /// A sphere's descriptors are constant: matching onto (or from) it leaves
 /// C undetermined. The pipeline says so instead of returning a map of
-/// 1e11-sized coefficients that sends every vertex to one vertex
-/// (issue 19, item 1); a sphere onto itself stays the identity.
+/// 1e11-sized coefficients that sends every vertex to one vertex;
+/// a sphere onto itself stays the identity.
 #[test]
 fn an_undetermined_map_is_an_error() {
     let (a, s) = (blob(), icosphere(1.0, 3));
@@ -382,7 +382,7 @@ fn an_undetermined_map_is_an_error() {
 #[test]
 fn refining_a_given_map() {
     use fmaps::pipeline::{prepare, refine_point_map};
-    let pair = fmaps::mesh_io::generate::creature_pair(3);
+    let pair = fmaps::shapes::creature_pair(3);
     let params = MatchParams {
         k: 30,
         k_process: 60,
@@ -433,7 +433,7 @@ fn refining_a_given_map() {
 #[test]
 fn multi_start_with_a_discrete_refiner() {
     use std::sync::Arc;
-    let pair = fmaps::mesh_io::generate::creature_pair(3);
+    let pair = fmaps::shapes::creature_pair(3);
     let d = fmaps::refine::DiscreteOp {
         k_start: 20,
         k_final: 40,

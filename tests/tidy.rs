@@ -89,7 +89,7 @@ fn code_of(line: &str) -> String {
 /// (calls of target-feature functions after the CPU check), the ARPACK
 /// binding, and the parsers' fuzz test (a counting global allocator).
 const UNSAFE_ALLOWED: [&str; 4] = [
-    "crates/nn/",
+    "crates/nearest/",
     "crates/simd/src/lib.rs",
     "crates/eigensolve/src/arpack.rs",
     "crates/mesh-io/tests/proptest.rs",
@@ -129,7 +129,7 @@ fn unsafe_code_only_where_allowed() {
     }
     assert!(
         bad.is_empty(),
-        "`unsafe` outside fmaps-nn, fmaps-simd and the ARPACK binding (ARCHITECTURE.md, \"Unsafe code\"): {bad:?}"
+        "`unsafe` outside fmaps-nearest, fmaps-simd and the ARPACK binding (ARCHITECTURE.md, \"Unsafe code\"): {bad:?}"
     );
 }
 
@@ -151,7 +151,7 @@ fn crates_outside_the_allowed_ones_forbid_unsafe_code() {
         }
     }
     for dir in crate_dirs() {
-        if dir == "nn" || dir == "simd" {
+        if dir == "nearest" || dir == "simd" {
             continue;
         }
         // The ARPACK binding, and PyO3's generated code (which allows
@@ -321,5 +321,159 @@ fn code_comments_carry_no_benchmark_timings() {
     assert!(
         bad.is_empty(),
         "timings in code comments (move them to README or docs/): {bad:?}"
+    );
+}
+
+/// Every text file a user or contributor reads (sources, manifests, docs,
+/// scripts, CI), as paths relative to the root: what the repository says
+/// about itself.
+fn text_files() -> Vec<String> {
+    fn walk(dir: &Path, root: &Path, out: &mut Vec<String>) {
+        let Ok(entries) = fs::read_dir(dir) else {
+            return;
+        };
+        for e in entries.flatten() {
+            let p = e.path();
+            let name = e.file_name().to_string_lossy().into_owned();
+            if name == "target" || name == ".git" || name == "__pycache__" {
+                continue;
+            }
+            if p.is_dir() {
+                walk(&p, root, out);
+                continue;
+            }
+            let ext = p.extension().map(|x| x.to_string_lossy().into_owned());
+            let text = matches!(
+                ext.as_deref(),
+                Some("rs" | "md" | "toml" | "py" | "pyi" | "sh" | "txt" | "json" | "yml" | "yaml")
+            ) || name == "run";
+            if text {
+                out.push(
+                    p.strip_prefix(root)
+                        .unwrap()
+                        .to_string_lossy()
+                        .replace('\\', "/"),
+                );
+            }
+        }
+    }
+    let root = workspace_root();
+    let mut out = Vec::new();
+    walk(&root, &root, &mut out);
+    out.sort();
+    out
+}
+
+/// Phrases that narrate how the software was made rather than what it is
+/// and does: numbered steps of the work, tracker numbers, records kept.
+/// Built from pieces so that this file does not match itself.
+fn process_phrases(line: &str) -> Option<String> {
+    let l = line.to_lowercase();
+    let numbered = |word: &str| {
+        l.match_indices(word).any(|(i, _)| {
+            let before = l[..i].chars().next_back();
+            let after = l[i + word.len()..].chars().next();
+            !before.is_some_and(|c| c.is_alphanumeric())
+                && after.is_some_and(|c| c.is_ascii_digit())
+        })
+    };
+    let session = concat!("sess", "ion");
+    let issue = concat!("iss", "ue");
+    for word in [
+        format!("{session} "),
+        format!("{session}s "),
+        format!("{issue} "),
+        format!("{issue}-"),
+        format!("{issue} #"),
+    ] {
+        if numbered(&word) {
+            return Some(word.trim().to_string());
+        }
+    }
+    [
+        format!("{issue}'s"),
+        format!("this {session}"),
+        format!("the {session}'s"),
+        format!("earlier {session}"),
+        concat!("kept for the ", "record").to_string(),
+        concat!("for the ", "record").to_string(),
+    ]
+    .into_iter()
+    .find(|phrase| l.contains(phrase))
+}
+
+#[test]
+fn the_process_detector_sees_work_narration_and_spares_ordinary_words() {
+    for bad in [
+        concat!("measured in Sess", "ion 45 on the Xeon"),
+        concat!("the iss", "ue 20 targets"),
+        concat!("see iss", "ue-21"),
+        concat!("as the iss", "ue's text asks"),
+        concat!("tables kept for the ", "record"),
+        concat!("before this ", "session"),
+    ] {
+        assert!(process_phrases(bad).is_some(), "{bad}");
+    }
+    for good in [
+        "a session of the Python interpreter",
+        "the llvm/llvm-project#133568 bug",
+        "issues a warning when 2 faces coincide",
+        "the session-wide cache",
+    ] {
+        assert!(process_phrases(good).is_none(), "{good}");
+    }
+}
+
+#[test]
+fn no_work_process_language_anywhere() {
+    let files = text_files();
+    assert!(
+        files.len() > 100 && files.iter().any(|f| f == "README.md"),
+        "the walk found {} files",
+        files.len()
+    );
+    let mut bad = Vec::new();
+    for f in &files {
+        for (i, line) in read(f).lines().enumerate() {
+            if let Some(p) = process_phrases(line) {
+                bad.push(format!("{f}:{}: \"{p}\"", i + 1));
+            }
+        }
+    }
+    assert!(
+        bad.is_empty(),
+        "the repository speaks about what the software is and does, not how it was made \
+         (measurements: docs/benchmarks.md; history: CHANGELOG.md, by version): {bad:#?}"
+    );
+}
+
+#[test]
+fn user_docs_do_not_point_into_the_development_folder() {
+    let docs: Vec<String> = text_files()
+        .into_iter()
+        .filter(|f| {
+            f == "README.md"
+                || f == "CHANGELOG.md"
+                || (f.starts_with("docs/") && f.ends_with(".md"))
+                || (f.starts_with("crates/") && f.ends_with("/README.md"))
+        })
+        .collect();
+    assert!(
+        docs.len() >= 15,
+        "found only {} user-facing documents: {docs:?}",
+        docs.len()
+    );
+    let mut bad = Vec::new();
+    for f in &docs {
+        for (i, line) in read(f).lines().enumerate() {
+            if line.contains(concat!("../sha", "red")) {
+                bad.push(format!("{f}:{}", i + 1));
+            }
+        }
+    }
+    assert!(
+        bad.is_empty(),
+        "user-facing docs point into a development folder a user does not have \
+         (say FMAPS_DATA, or name the public release): {bad:?}"
     );
 }

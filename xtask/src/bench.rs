@@ -91,7 +91,7 @@ pub fn bench(args: &Args) -> anyhow::Result<()> {
     let mut mesh = fmaps::mesh_io::read_mesh(&base)?;
     for level in 0..=levels.iter().copied().max().unwrap_or(0) {
         if level > 0 {
-            mesh = fmaps::mesh_io::generate::subdivide(&mesh);
+            mesh = fmaps::shapes::subdivide(&mesh);
         }
         if levels.contains(&level) {
             let p = if level == 0 {
@@ -261,7 +261,7 @@ pub fn bench(args: &Args) -> anyhow::Result<()> {
     std::fs::write(
         &json_path,
         serde_json::to_string_pretty(
-            &json!({"cpu": crate::util::cpu_model(), "kernels": fmaps::nn::cpu_features().to_string(), "records": records}),
+            &json!({"cpu": crate::util::cpu_model(), "kernels": fmaps::nearest::cpu_features().to_string(), "records": records}),
         )?,
     )?;
     println!("\nwrote {}", json_path.display());

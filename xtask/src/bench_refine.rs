@@ -22,7 +22,7 @@ use std::time::Instant;
 use anyhow::{Context, bail};
 use fmaps::eval::{Collection, EvalParams, evaluate};
 use fmaps::geodesic::ExactSolver;
-use fmaps::nn::{NnParams, NnStrategy, view};
+use fmaps::nearest::{NnParams, NnStrategy, view};
 use fmaps::pipeline::{MatchParams, match_prepared, prepare};
 use fmaps::refine::{Icp, Refiner, ZoomOut};
 
@@ -38,7 +38,7 @@ fn nearest(
     hint: Option<&[usize]>,
     strategy: NnStrategy,
 ) -> Vec<usize> {
-    fmaps::nn::nearest_rows(
+    fmaps::nearest::nearest_rows(
         view(data),
         view(queries),
         hint,
@@ -79,8 +79,8 @@ fn peak_mib() -> f64 {
 
 /// ZoomOut on the ~80k-vertex subdivided pair.
 fn large(args: &Args, c: &Collection, a: &str, b: &str) -> anyhow::Result<()> {
-    use fmaps::mesh_io::generate::subdivide;
     use fmaps::refine::Subsample;
+    use fmaps::shapes::subdivide;
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(args.bench.threads)
         .build()?;
@@ -249,10 +249,10 @@ pub fn bench_refine(args: &Args) -> anyhow::Result<()> {
     );
     // The clusters of B's rows for the ball search, once (as ZoomOut and
     // ICP compute them once per shape; not timed).
-    let partition = fmaps::nn::Partition::kmeans(
+    let partition = fmaps::nearest::Partition::kmeans(
         view(&basis_1.eigenvectors),
-        fmaps::nn::BALL_SIZE,
-        fmaps::nn::KMEANS_STEPS,
+        fmaps::nearest::BALL_SIZE,
+        fmaps::nearest::KMEANS_STEPS,
     );
     let mut nn_rows = Vec::new();
     for k in [10usize, 30, 50, 100, 150, 200] {
@@ -302,7 +302,7 @@ pub fn bench_refine(args: &Args) -> anyhow::Result<()> {
         });
         let (t_balls, i_balls) = pool.install(|| {
             time(args.bench.repeat, || {
-                fmaps::nn::nearest_rows(
+                fmaps::nearest::nearest_rows(
                     view(&data),
                     view(&queries),
                     Some(&guess),

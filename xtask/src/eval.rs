@@ -287,7 +287,7 @@ fn pipeline_method(method: &str) -> anyhow::Result<Option<PipelineMethod>> {
             "fmaps-init" => Refinement::None,
             "fmaps-icp" => Refinement::Icp(fmaps::refine::Icp::default()),
             "fmaps-zoomout" => Refinement::default_zoomout(),
-            // `fmaps match` without flags; `smooth-shells` as issue 22 names it.
+            // `fmaps match` without flags, also under the refiner's own name.
             "fmaps-default" | "smooth-shells" => Refinement::recommended(),
             "fmaps-bijective-zoomout"
             | "fmaps-discrete"

@@ -1,11 +1,11 @@
 //! The generated benchmark collection (`cargo xtask generate`, and on
 //! demand by `cargo xtask eval --collection generated-iso|generated-noniso`):
-//! bodies of [`fmaps::mesh_io::body`] with exact ground truth, written in
+//! bodies of [`fmaps::shapes::body`] with exact ground truth, written in
 //! the layout of the remeshed FAUST/TOSCA benchmark so that every tool
 //! (`fmaps eval`, `cargo xtask eval`, the Python peers) reads them as it
 //! reads FAUST.
 //!
-//! Six individuals (pseudo-random [`Build`](fmaps::mesh_io::body::Build)s: limbs and tail 0.6-1.6 times
+//! Six individuals (pseudo-random [`Build`](fmaps::shapes::body::Build)s: limbs and tail 0.6-1.6 times
 //! the template, girths and head 0.7-1.4, ...), each in four poses (rest,
 //! walking, crouching, reaching, each jittered per individual); every shape
 //! remeshed independently (grid spacing 0.039-0.047, random grid offset:
@@ -23,7 +23,7 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::Context;
-use fmaps::mesh_io::body::{Body, mirrored, nearest_vertices};
+use fmaps::shapes::body::{Body, mirrored, nearest_vertices};
 
 use crate::util::root;
 

@@ -51,7 +51,7 @@ pub fn test(args: &Args) -> anyhow::Result<()> {
         all.extend(["--features", f]);
     }
     cargo(&all, &[])?;
-    cargo(&["test", "-p", "fmaps-nn"], &[("FMAPS_NO_AMX", "1")])
+    cargo(&["test", "-p", "fmaps-nearest"], &[("FMAPS_NO_AMX", "1")])
 }
 
 /// Options of `cargo xtask fuzz`.

@@ -28,7 +28,7 @@ pub struct PairBench {
     #[arg(long, default_value_t = 0)]
     pub pair: usize,
     /// Repetitions of each timing, both sides, after a warm-up run
-    /// (medians are reported; issue 20 asks for at least 5).
+    /// (medians are reported, so at least 5).
     #[arg(long, default_value_t = 5)]
     pub repeat: usize,
     /// Threads for both sides.
@@ -278,6 +278,6 @@ pub fn machine_header(threads_used: usize) -> String {
         "machine: {} ({} cores); fmaps kernels: {}; fmaps threads used: {threads_used}",
         cpu_model(),
         std::thread::available_parallelism().map_or(0, |n| n.get()),
-        fmaps::nn::cpu_features()
+        fmaps::nearest::cpu_features()
     )
 }

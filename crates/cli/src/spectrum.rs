@@ -36,11 +36,11 @@ pub(crate) fn spectrum(
         (Some(p), _) => (p.display().to_string(), load(p)?),
         (None, Some(Builtin::Sphere)) => (
             "builtin unit sphere (icosphere, 5 subdivisions)".to_string(),
-            mesh_io::generate::icosphere(1.0, 5),
+            fmaps::shapes::icosphere(1.0, 5),
         ),
         (None, Some(Builtin::Torus)) => (
             "builtin torus R=1, r=0.4".to_string(),
-            mesh_io::generate::torus(1.0, 0.4, 160, 64),
+            fmaps::shapes::torus(1.0, 0.4, 160, 64),
         ),
         (None, None) => return Err(input(anyhow::anyhow!("give a mesh file or --builtin"))),
     };

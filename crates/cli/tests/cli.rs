@@ -32,7 +32,7 @@ fn spectrum_of_the_builtin_sphere() {
 fn spectrum_writes_npy_files() {
     let dir = tmpdir("npy");
     let mesh = dir.join("torus.off");
-    fmaps::mesh_io::write_mesh(&mesh, &fmaps::mesh_io::generate::torus(2.0, 0.5, 20, 10)).unwrap();
+    fmaps::mesh_io::write_mesh(&mesh, &fmaps::shapes::torus(2.0, 0.5, 20, 10)).unwrap();
     let out = dir.join("basis.npy");
     let st = fmaps()
         .args([
@@ -68,7 +68,7 @@ fn spectrum_writes_npy_files() {
 fn info_reports_json_and_text() {
     let dir = tmpdir("info");
     let mesh = dir.join("grid.ply");
-    fmaps::mesh_io::write_mesh(&mesh, &fmaps::mesh_io::generate::grid(1.0, 1.0, 3, 3)).unwrap();
+    fmaps::mesh_io::write_mesh(&mesh, &fmaps::shapes::grid(1.0, 1.0, 3, 3)).unwrap();
     let out = fmaps()
         .args(["info", mesh.to_str().unwrap(), "--json"])
         .output()
@@ -116,7 +116,7 @@ fn bad_input_exits_with_2_and_a_clear_message() {
 fn geodesic_distances_on_a_flat_grid() {
     let dir = tmpdir("geo");
     let mesh = dir.join("grid.off");
-    fmaps::mesh_io::write_mesh(&mesh, &fmaps::mesh_io::generate::grid(3.0, 2.0, 6, 4)).unwrap();
+    fmaps::mesh_io::write_mesh(&mesh, &fmaps::shapes::grid(3.0, 2.0, 6, 4)).unwrap();
     // `fmaps geodesic --method METHOD --json --out FILE`: the method named
     // in the JSON, and the distances in the file.
     let run = |method: &str| -> (String, Vec<f64>) {
@@ -227,7 +227,7 @@ fn match_writes_a_one_based_map_and_reports_stages() {
     // The built-in creature matched to itself: every map entry is a valid
     // 1-based index. (A rotationally symmetric torus would be refused: its
     // descriptors leave C undetermined.)
-    let m = fmaps::mesh_io::generate::creature_pair(3).source;
+    let m = fmaps::shapes::creature_pair(3).source;
     let mesh = dir.join("t.off");
     fmaps::mesh_io::write_mesh(&mesh, &m).unwrap();
     let map = dir.join("t_t.map");
@@ -404,8 +404,8 @@ fn demo_matches_the_builtin_pair_and_writes_pictures() {
     assert!(v["orientation"].as_f64().unwrap() > 0.8);
     // The non-isometric pair (two bodies of different builds): the
     // descriptor map is near random there (measured 0.35; random maps
-    // score ~0.6); the default repairs it to well under the issue-21
-    // target of 0.12 (measured 0.030).
+    // score ~0.6); the default repairs it to well under 0.12, a third of
+    // the descriptor map's error (measured 0.030).
     let noniso = &v["pairs"][1];
     let (init, fin) = (
         noniso["mean_error_init"].as_f64().unwrap(),
@@ -573,7 +573,7 @@ fn render_subcommands_write_pictures_and_report_checked_numbers() {
 
     // Spectral embedding of the unit sphere: the first non-constant
     // eigenvalues are l(l+1) = 2 (up to discretisation).
-    let s = fmaps::mesh_io::generate::icosphere(1.0, 3);
+    let s = fmaps::shapes::icosphere(1.0, 3);
     fmaps::mesh_io::write_mesh(dir.join("s.off"), &s).unwrap();
     let v = json(&["embedding", &p("s.off"), "--out", &p("emb.png")]);
     for e in v["eigenvalues"].as_array().unwrap() {
@@ -590,7 +590,7 @@ fn render_subcommands_write_pictures_and_report_checked_numbers() {
 #[test]
 fn refine_repairs_a_given_map() {
     let dir = tmpdir("refine");
-    let pair = fmaps::mesh_io::generate::creature_pair(3);
+    let pair = fmaps::shapes::creature_pair(3);
     fmaps::mesh_io::write_mesh(dir.join("a.off"), &pair.source).unwrap();
     fmaps::mesh_io::write_mesh(dir.join("b.off"), &pair.target).unwrap();
     let n = pair.truth.len();
@@ -686,7 +686,7 @@ fn batch_matches_every_pair_once_resumes_and_shards() {
     let dir = tmpdir("batch");
     let s = |p: &std::path::Path| p.to_str().unwrap().to_string();
     // Three shapes: the creature, its bent copy, and the copy scaled.
-    let pair = fmaps::mesh_io::generate::creature_pair(3);
+    let pair = fmaps::shapes::creature_pair(3);
     let data = dir.join("data");
     std::fs::create_dir_all(&data).unwrap();
     fmaps::mesh_io::write_mesh(data.join("rest.off"), &pair.source).unwrap();

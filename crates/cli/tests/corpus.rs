@@ -1,5 +1,5 @@
 //! A corpus of nasty inputs, generated here (no data committed), through
-//! every subcommand (issue 19): each run must exit 0, 1 or 2 as README's
+//! every subcommand: each run must exit 0, 1 or 2 as docs/cli.md's
 //! "Errors and exit codes" says, never print "panicked at", name the
 //! offending file when it rejects one (exit 2), finish within a time limit,
 //! and leave output files untouched (and no temporaries) when it fails.
@@ -14,8 +14,8 @@ use std::process::Stdio;
 use std::time::{Duration, Instant};
 
 use common::{TmpDir, fmaps, tmpdir};
-use fmaps::mesh_io::generate::{disjoint_union, icosphere, translated};
 use fmaps::mesh_io::{TriMesh, write_obj, write_off, write_ply};
+use fmaps::shapes::{disjoint_union, icosphere, translated};
 
 /// A run over this is a hang.
 const LIMIT: Duration = Duration::from_secs(120);
@@ -445,7 +445,7 @@ fn nasty_meshes_through_every_subcommand() {
 }
 
 /// The heat method and exact geodesics agree that the far component of a
-/// disconnected target is unreachable (issue 19, item 8).
+/// disconnected target is unreachable.
 #[test]
 fn heat_and_exact_agree_on_unreachable_vertices() {
     let dir = corpus_dir("corpus-heat");

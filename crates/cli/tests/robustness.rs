@@ -1,12 +1,12 @@
-//! What a careless or hostile user feeds the CLI (issue 19): units,
+//! What a careless or hostile user feeds the CLI: units,
 //! typed sizes, outputs that must not clobber anything, inputs too small.
 
 mod common;
 use common::{fmaps, json_of, refused, run_in, tmpdir};
 
 /// The built-in pair at `subdivisions`, written as a.off and b.off.
-fn write_pair(dir: &std::path::Path, subdivisions: u32) -> fmaps::mesh_io::generate::MeshPair {
-    let pair = fmaps::mesh_io::generate::creature_pair(subdivisions);
+fn write_pair(dir: &std::path::Path, subdivisions: u32) -> fmaps::shapes::MeshPair {
+    let pair = fmaps::shapes::creature_pair(subdivisions);
     fmaps::mesh_io::write_mesh(dir.join("a.off"), &pair.source).unwrap();
     fmaps::mesh_io::write_mesh(dir.join("b.off"), &pair.target).unwrap();
     pair
@@ -59,8 +59,8 @@ fn match_does_not_depend_on_the_units() {
 }
 
 /// Sizes a user can type are bounded by what the input makes sensible,
-/// with exit code 2 and a reason, never a panic or a runaway allocation
-/// (issue 19, items 3-5): descriptor samples beyond 4 x the eigenpairs
+/// with exit code 2 and a reason, never a panic or a runaway allocation:
+/// descriptor samples beyond 4 x the eigenpairs
 /// they come from, descriptor matrices beyond 2 GB (landmarks), threads
 /// beyond 4 per core; a ZoomOut step that would overflow just ends the
 /// schedule.
@@ -108,7 +108,7 @@ fn typed_sizes_are_bounded() {
 
 /// Outputs never overwrite an input or each other, and a command that
 /// fails leaves every previous output as it was, with no temporary file
-/// behind (issue 19, item 6).
+/// behind.
 #[test]
 fn outputs_are_atomic_and_never_clobber_inputs() {
     let dir = tmpdir("atomic");
@@ -172,11 +172,11 @@ fn outputs_are_atomic_and_never_clobber_inputs() {
 }
 
 /// Meshes too small for the asked eigenpairs are bad input (exit 2, as in
-/// `fmaps spectrum`), and the reason is printed once (issue 19, item 9).
+/// `fmaps spectrum`), and the reason is printed once.
 #[test]
 fn match_on_too_small_meshes_is_bad_input_said_once() {
     let dir = tmpdir("small");
-    let m = fmaps::mesh_io::generate::icosphere(1.0, 0);
+    let m = fmaps::shapes::icosphere(1.0, 0);
     fmaps::mesh_io::write_mesh(dir.join("s.off"), &m).unwrap();
     let out = fmaps()
         .current_dir(&dir)
@@ -195,10 +195,10 @@ fn match_on_too_small_meshes_is_bad_input_said_once() {
 
 /// A clean blob matched onto a clean icosphere: the sphere's descriptors
 /// are constant, C is undetermined. Exit 1 with the reason and what to
-/// try, the old output kept (issue 19, item 1).
+/// try, the old output kept.
 #[test]
 fn an_undetermined_functional_map_is_refused() {
-    use fmaps::mesh_io::generate::icosphere;
+    use fmaps::shapes::icosphere;
     let dir = tmpdir("undetermined");
     let s = icosphere(1.0, 3);
     let (v, f) = s.clone().into_parts();

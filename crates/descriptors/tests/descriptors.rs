@@ -6,7 +6,7 @@ use fmaps_descriptors::*;
 use fmaps_eigensolve::{EigenProblem, EigenSolver, NativeSolver, SpectralBasis};
 use fmaps_laplacian::{LaplacianParams, cotan_laplacian};
 use fmaps_mesh_io::TriMesh;
-use fmaps_mesh_io::generate::torus;
+use fmaps_shapes::torus;
 use nalgebra::{DMatrix, DVector};
 
 const K: usize = 30;

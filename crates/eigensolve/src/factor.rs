@@ -337,7 +337,7 @@ mod tests {
     /// solves the system (residual at rounding level).
     #[test]
     fn row_block_solve_is_faers_bit_for_bit() {
-        let mesh = fmaps_mesh_io::generate::torus(2.0, 0.7, 40, 17);
+        let mesh = fmaps_shapes::torus(2.0, 0.7, 40, 17);
         let op = fmaps_laplacian::cotan_laplacian(&mesh, &Default::default());
         let problem = EigenProblem::new(op.stiffness.view(), &op.mass).unwrap();
         let f = ShiftInvert::new(&problem, -0.01, 1, Factorization::Simplicial).unwrap();

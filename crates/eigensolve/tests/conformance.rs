@@ -9,7 +9,7 @@
 use fmaps_eigensolve::*;
 use fmaps_laplacian::{LaplaceOperator, LaplacianParams, cotan_laplacian};
 use fmaps_mesh_io::TriMesh;
-use fmaps_mesh_io::generate::{disjoint_union, grid, icosphere, torus, translated};
+use fmaps_shapes::{disjoint_union, grid, icosphere, torus, translated};
 use nalgebra::DMatrix;
 
 fn backends() -> Vec<Box<dyn EigenSolver>> {

@@ -17,7 +17,7 @@
 //! ```
 //! use fmaps_eval::{evaluate, EvalParams, GroundTruth};
 //! use fmaps_geodesic::ExactSolver;
-//! use fmaps_mesh_io::generate::grid;
+//! use fmaps_shapes::grid;
 //!
 //! let b = grid(1.0, 1.0, 4, 4); // area 1
 //! let solver = ExactSolver::new(&b)?;

@@ -209,7 +209,7 @@ fn norm(a: [f64; 3]) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use fmaps_mesh_io::generate::{grid, icosphere};
+    use fmaps_shapes::{grid, icosphere};
 
     fn stretched(m: &TriMesh, s: [f64; 3]) -> TriMesh {
         let (v, f) = m.clone().into_parts();

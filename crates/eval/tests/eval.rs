@@ -5,7 +5,7 @@ use std::path::PathBuf;
 
 use fmaps_eval::*;
 use fmaps_geodesic::{DijkstraSolver, ExactSolver};
-use fmaps_mesh_io::generate::grid;
+use fmaps_shapes::grid;
 
 /// A 2 x 1 grid, 9 x 5 vertices, mirrored by x -> 2 - x.
 fn setup() -> (fmaps_mesh_io::TriMesh, Vec<usize>) {

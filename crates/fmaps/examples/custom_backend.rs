@@ -13,8 +13,8 @@ use fmaps::eigensolve::{
     EigenProblem, EigenSolver, Factorization, Result, ShiftInvert, SolveStats, SpectralBasis,
     conformance, default_shift,
 };
-use fmaps::mesh_io::generate::creature_pair;
 use fmaps::pipeline::{MatchParams, Refinement, match_shapes};
+use fmaps::shapes::creature_pair;
 use fmaps::{Backend, SpectrumParams};
 use nalgebra::{DMatrix, DVector, SymmetricEigen};
 

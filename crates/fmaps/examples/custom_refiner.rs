@@ -13,11 +13,11 @@ use std::sync::Arc;
 use std::time::Instant;
 
 use fmaps::eigensolve::SpectralBasis;
-use fmaps::mesh_io::generate::creature_pair;
 use fmaps::pipeline::{MatchParams, Refinement, match_shapes};
 use fmaps::refine::{
     Error, Iteration, RefineReport, Refined, Refiner, Result, ZoomOut, conformance,
 };
+use fmaps::shapes::creature_pair;
 use fmaps::solve::{fmap_from_point_map, point_map_from_fmap};
 use nalgebra::DMatrix;
 

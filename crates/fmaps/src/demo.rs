@@ -4,8 +4,8 @@
 
 use crate::eval::GroundTruth;
 use crate::mesh_io::TriMesh;
-use crate::mesh_io::body::{Body, mirrored, nearest_vertices};
-use crate::mesh_io::generate::creature_pair;
+use crate::shapes::body::{Body, mirrored, nearest_vertices};
+use crate::shapes::creature_pair;
 
 /// One built-in pair: source `a`, target `b` and their ground truth
 /// (`gt_a[i]` of A corresponds to `gt_b[i]` of B, and to `gt_b_sym[i]`

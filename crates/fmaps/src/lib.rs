@@ -20,7 +20,7 @@
 //!
 //! ```
 //! use fmaps::{spectrum, SpectrumParams};
-//! use fmaps::mesh_io::generate::icosphere;
+//! use fmaps::shapes::icosphere;
 //!
 //! // The first nine eigenvalues of a unit sphere: 0, then 2 (x3), then 6 (x5).
 //! let out = spectrum(&icosphere(1.0, 3), 9, &SpectrumParams::default())?;
@@ -47,8 +47,9 @@ pub use fmaps_eval as eval;
 pub use fmaps_geodesic as geodesic;
 pub use fmaps_laplacian as laplacian;
 pub use fmaps_mesh_io as mesh_io;
-pub use fmaps_nn as nn;
+pub use fmaps_nearest as nearest;
 pub use fmaps_refine as refine;
+pub use fmaps_shapes as shapes;
 pub use fmaps_solve as solve;
 pub use fmaps_viz as viz;
 pub use pipeline::{MatchParams, MatchResult, match_shapes};

@@ -77,7 +77,7 @@ fn transfer(
 ///
 /// ```
 /// use fmaps::pictures::vertex_values;
-/// let mesh = fmaps::mesh_io::generate::grid(1.0, 1.0, 3, 1); // 4 x 2 vertices
+/// let mesh = fmaps::shapes::grid(1.0, 1.0, 3, 1); // 4 x 2 vertices
 /// let v = vertex_values(&mesh, &[0, 0, 7], &[1.0, 3.0, 5.0]);
 /// assert_eq!(v[0], 2.0); // mean of its two rows
 /// assert_eq!(v[7], 5.0);

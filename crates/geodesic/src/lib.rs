@@ -23,7 +23,7 @@
 //!
 //! ```
 //! use fmaps_geodesic::{DistanceSolver, ExactSolver};
-//! use fmaps_mesh_io::generate::grid;
+//! use fmaps_shapes::grid;
 //!
 //! // On a flat grid exact geodesic distance is Euclidean distance.
 //! let mesh = grid(2.0, 1.0, 8, 4);

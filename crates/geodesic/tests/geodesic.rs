@@ -2,7 +2,7 @@
 
 use fmaps_geodesic::*;
 use fmaps_mesh_io::TriMesh;
-use fmaps_mesh_io::generate::{disjoint_union, grid, icosphere, torus, translated};
+use fmaps_shapes::{disjoint_union, grid, icosphere, torus, translated};
 use proptest::prelude::*;
 
 fn euclid(p: [f64; 3], q: [f64; 3]) -> f64 {

@@ -23,7 +23,7 @@
 //!
 //! ```
 //! use fmaps_laplacian::{cotan_laplacian, LaplacianParams};
-//! use fmaps_mesh_io::generate::icosphere;
+//! use fmaps_shapes::icosphere;
 //!
 //! let mesh = icosphere(1.0, 3);
 //! let op = cotan_laplacian(&mesh, &LaplacianParams::default());

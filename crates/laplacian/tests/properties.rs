@@ -3,7 +3,7 @@
 
 use fmaps_laplacian::{LaplaceOperator, LaplacianParams, MassKind, cotan_laplacian};
 use fmaps_mesh_io::TriMesh;
-use fmaps_mesh_io::generate::{disjoint_union, grid, icosphere, torus, translated};
+use fmaps_shapes::{disjoint_union, grid, icosphere, torus, translated};
 use nalgebra::DMatrix;
 
 /// A grid with one extra vertex on an edge's midpoint and a zero-area face.

@@ -36,10 +36,6 @@ pub enum Error {
     /// A scale factor that is not finite and positive.
     #[error("scale factor {0} must be finite and positive")]
     InvalidScale(f64),
-    /// A generated mesh (an isosurface, a body) cannot be built with the
-    /// parameters given.
-    #[error("{0}")]
-    Generate(String),
     /// The file could not be opened, read or written.
     #[error("{}: input/output error", path.display())]
     Io {

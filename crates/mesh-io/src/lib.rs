@@ -47,17 +47,12 @@
 
 pub mod atomic;
 pub mod basis;
-pub mod body;
 mod corres;
-mod creature;
 mod error;
-pub mod generate;
-pub mod isosurface;
 mod obj;
 mod off;
 mod ply;
 mod validate;
-mod vec3;
 
 use std::fs;
 use std::path::Path;

@@ -354,7 +354,7 @@ fn obj_errors_name_the_line() {
 /// corner positions (tobj renumbers vertices, so indices are not compared).
 #[test]
 fn obj_agrees_with_tobj_on_geometry() {
-    let m = generate::torus(2.0, 0.5, 7, 5);
+    let m = fmaps_shapes::torus(2.0, 0.5, 7, 5);
     let mut bytes = Vec::new();
     write_obj(&mut bytes, &m).unwrap();
     let ours = parse_obj(&bytes).unwrap();
@@ -442,7 +442,7 @@ fn file_errors_name_the_file() {
     let msg = read_map(&map).unwrap_err().to_string();
     assert!(msg.contains("a_b.map") && msg.contains("line 2"), "{msg}");
 
-    let m = generate::icosphere(1.0, 1);
+    let m = fmaps_shapes::icosphere(1.0, 1);
     for ext in ["off", "ply", "obj"] {
         let p = dir.join(format!("ico.{ext}"));
         write_mesh(&p, &m).unwrap();
@@ -487,7 +487,7 @@ fn trimesh_new_rejects_invalid_arrays() {
     ));
 }
 
-/// Silent misreads (issue 19, item 7): a UTF-8 byte-order mark is not
+/// Silent misreads: a UTF-8 byte-order mark is not
 /// content (an OBJ used to lose its first vertex), carriage-return-only
 /// line breaks are line breaks, and faces beyond the OFF header's count
 /// are an error naming the line instead of being dropped.

@@ -75,7 +75,7 @@ fn cases() -> u32 {
 }
 
 fn valid_files() -> Vec<(Format, Vec<u8>)> {
-    let m = generate::torus(2.0, 0.5, 4, 3);
+    let m = fmaps_shapes::torus(2.0, 0.5, 4, 3);
     let mut out = Vec::new();
     let mut off = Vec::new();
     write_off(&mut off, &m).unwrap();

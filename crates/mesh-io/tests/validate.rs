@@ -1,7 +1,7 @@
 //! The validation report on meshes with known combinatorics.
 
 use fmaps_mesh_io::TriMesh;
-use fmaps_mesh_io::generate::{disjoint_union, grid, icosphere, torus, translated};
+use fmaps_shapes::{disjoint_union, grid, icosphere, torus, translated};
 
 #[test]
 fn icosphere_is_a_clean_sphere() {
@@ -111,7 +111,7 @@ fn flipped_face_is_an_orientation_defect() {
 
 #[test]
 fn subdivision_keeps_the_surface() {
-    use fmaps_mesh_io::generate::subdivide;
+    use fmaps_shapes::subdivide;
     for m in [torus(3.0, 1.0, 9, 7), grid(2.0, 1.0, 3, 2)] {
         let r = m.validate();
         let s = subdivide(&m);
@@ -155,12 +155,12 @@ fn face_adjacency_is_mutual_and_none_on_the_boundary() {
     assert!(g.face_adjacency().non_manifold_edges.is_empty());
 }
 
-/// The generators never panic on extreme input (issue 19, item 10): a
+/// The generators never panic on extreme input: a
 /// translation out of the finite range is an error, and subdivision of a
 /// mesh with coordinates near f64::MAX keeps every midpoint finite.
 #[test]
 fn translation_and_subdivision_at_the_edge_of_f64() {
-    use fmaps_mesh_io::generate::{subdivide, translated};
+    use fmaps_shapes::{subdivide, translated};
     let g = grid(1.0, 1.0, 2, 2);
     assert!(translated(&g, [f64::MAX, 0.0, 0.0]).is_ok());
     assert!(translated(&g, [f64::INFINITY, 0.0, 0.0]).is_err());

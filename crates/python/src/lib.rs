@@ -708,7 +708,7 @@ fn match_prepared(
 #[pyfunction]
 fn generated_body(py: Python<'_>, individual: usize, pose: usize) -> PyResult<Mesh> {
     let shape = py
-        .detach(|| fmaps::mesh_io::body::Body::template().collection_shape(individual, pose))
+        .detach(|| fmaps::shapes::body::Body::template().collection_shape(individual, pose))
         .map_err(err)?;
     Ok(Mesh {
         inner: Arc::new(shape.mesh),

@@ -37,7 +37,7 @@ use faer::linalg::matmul::matmul;
 use faer::reborrow::ReborrowMut;
 use faer::{Accum, Mat, MatRef, Par};
 use fmaps_eigensolve::SpectralBasis;
-use fmaps_nn::{NnParams, nearest_rows};
+use fmaps_nearest::{NnParams, nearest_rows};
 use fmaps_solve::convert::{BasisRows, pullback};
 use nalgebra::DMatrix;
 

@@ -6,13 +6,13 @@ use fmaps_eigensolve::SpectralBasis;
 use nalgebra::DMatrix;
 
 use crate::{Error, Iteration, RefineReport, Refined, Refiner, Result, check_k, count_changed};
-use fmaps_nn::{CheckedRows, ImageSearch, NnParams, NnStrategy};
+use fmaps_nearest::{CheckedRows, ImageSearch, NnParams, NnStrategy};
 use fmaps_solve::convert::{
     BasisRows, Conversion, point_map, point_map_sinkhorn, pullback, pullback_update,
 };
 use fmaps_solve::sinkhorn::Sinkhorn;
 
-/// Lloyd steps of ICP's clusters ([`fmaps_nn::Partition::for_balls_with_steps`]).
+/// Lloyd steps of ICP's clusters ([`fmaps_nearest::Partition::for_balls_with_steps`]).
 const ICP_KMEANS_STEPS: usize = 2;
 
 /// ICP in the spectral domain: alternate `T_BA = NN(C)` and
@@ -128,7 +128,7 @@ impl Icp {
         };
         let nn_params = match partition {
             Some(p) => NnParams::with_strategy(NnStrategy::Balls).with_partition(p),
-            None => NnParams::with_strategy(if dim > 48 && !fmaps_nn::tiles_available() {
+            None => NnParams::with_strategy(if dim > 48 && !fmaps_nearest::tiles_available() {
                 NnStrategy::Prefix
             } else {
                 NnStrategy::Auto

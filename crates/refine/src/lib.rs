@@ -36,14 +36,14 @@
 //!
 //! All implement [`Refiner`], so a pipeline swaps one for the other (or
 //! for its own) through a trait object. Every nearest-neighbour search is
-//! exact ([`fmaps_nn::nearest_rows`]), so the results are deterministic
+//! exact ([`fmaps_nearest::nearest_rows`]), so the results are deterministic
 //! and independent of the thread count.
 //!
 //! ```
 //! use fmaps_refine::{Refiner, ZoomOut};
 //! # use fmaps_eigensolve::{EigenProblem, EigenSolver, NativeSolver};
 //! # use fmaps_laplacian::{cotan_laplacian, LaplacianParams};
-//! # let mesh = fmaps_mesh_io::generate::torus(2.0, 0.7, 24, 11);
+//! # let mesh = fmaps_shapes::torus(2.0, 0.7, 24, 11);
 //! # let op = cotan_laplacian(&mesh, &LaplacianParams::default());
 //! # let basis = NativeSolver::default().solve(&EigenProblem::new(op.stiffness.view(), &op.mass)?, 40)?;
 //! // Refine the identity functional map of a shape to itself, from a 10 x 10

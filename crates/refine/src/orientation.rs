@@ -25,7 +25,7 @@ use crate::{Error, Result};
 ///
 /// ```
 /// use fmaps_refine::orientation_score;
-/// let mesh = fmaps_mesh_io::generate::icosphere(1.0, 2);
+/// let mesh = fmaps_shapes::icosphere(1.0, 2);
 /// let (v, f) = (mesh.vertices(), mesh.faces());
 /// let identity: Vec<usize> = (0..v.len()).collect();
 /// assert!(orientation_score(&identity, v, f, v, f)? > 0.999);
@@ -102,7 +102,7 @@ pub fn orientation_score(
 ///
 /// ```
 /// use fmaps_refine::area_distortion;
-/// let mesh = fmaps_mesh_io::generate::icosphere(1.0, 2);
+/// let mesh = fmaps_shapes::icosphere(1.0, 2);
 /// let (v, f) = (mesh.vertices(), mesh.faces());
 /// let identity: Vec<usize> = (0..v.len()).collect();
 /// assert!(area_distortion(&identity, v, f, v, f)?.abs() < 1e-12);

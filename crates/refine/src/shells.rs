@@ -27,7 +27,7 @@
 //! directions, at full detail). Each of the two best rigid orientations
 //! gets the fixed proposals — the unperturbed shell, the input functional
 //! map, and the sign hypotheses of φ_2..φ_5 (every choice of signs as the
-//! first features' map, the "eigenfunction sign choices") — and
+//! first features' map, the paper's "eigenfunction sign choices") — and
 //! 60 random coarse deformations `τ[:6]` (scaled by the shell's own
 //! coefficients, half of them with Laplacian commutativity in the map
 //! fit, as in the authors' code). Each orientation's best proposal (τ and
@@ -65,6 +65,7 @@ mod level;
 mod posed;
 mod rigid;
 mod screen;
+mod shell;
 
 /// The smallest shell of the proposals.
 const K_MIN: usize = 6;
@@ -94,8 +95,9 @@ use nalgebra::{DMatrix, Matrix3, Vector3};
 use rayon::prelude::*;
 
 use crate::{Error, Iteration, RefineReport, Refined, Refiner, Result, ShapeGeometry};
-use level::{Alignment, LevelWeights, Samples, Shell};
+use level::{Alignment, LevelWeights, Samples};
 use rigid::{align_vectors, axis_icp, axis_rotation};
+use shell::Shell;
 
 /// The Smooth Shells refiner (see the module docs). With its own
 /// initialisation it needs no initial map: the input map is one of the

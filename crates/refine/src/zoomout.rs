@@ -6,7 +6,7 @@ use fmaps_eigensolve::SpectralBasis;
 use nalgebra::DMatrix;
 
 use crate::{Error, Iteration, RefineReport, Refined, Refiner, Result, check_k, count_changed};
-use fmaps_nn::{CheckedRows, ImageSearch, NnParams};
+use fmaps_nearest::{CheckedRows, ImageSearch, NnParams};
 use fmaps_solve::convert::{
     BasisRows, Conversion, gram, point_map, point_map_sinkhorn, pullback, pullback_unweighted,
     pullback_update,
@@ -41,7 +41,7 @@ pub struct Subsample {
 }
 
 /// Clusters for the full-size search among the `n` rows of a shape after
-/// iterations on samples: `n /` [`fmaps_nn::coarse_ball_size`]`(n)`
+/// iterations on samples: `n /` [`fmaps_nearest::coarse_ball_size`]`(n)`
 /// (rows per cluster about `√(n/5)`): on FAUST's 80k pair, 635 cells of
 /// ~126 rows, which search faster than the 5000 samples' cells of ~16
 /// (README, "Large meshes are sampled by default").
@@ -50,7 +50,7 @@ pub struct Subsample {
 /// assert_eq!(fmaps_refine::search_cells(80_000), 635);
 /// ```
 pub fn search_cells(n: usize) -> usize {
-    n.div_ceil(fmaps_nn::coarse_ball_size(n)).max(1)
+    n.div_ceil(fmaps_nearest::coarse_ball_size(n)).max(1)
 }
 
 impl Subsample {
@@ -88,19 +88,19 @@ impl Subsample {
 
     /// The clusters of A's rows `rows_a` (one per vertex of A) for a
     /// full-size ball search: the cells of `nearest_a`, where the ball
-    /// search pays ([`fmaps_nn::Partition::for_balls_from_labels`]);
+    /// search pays ([`fmaps_nearest::Partition::for_balls_from_labels`]);
     /// `None` without `nearest_a` or where another search is faster.
     pub fn cells_of_a(
         &self,
         rows_a: faer::MatRef<'_, f64>,
-    ) -> Option<std::sync::Arc<fmaps_nn::Partition>> {
+    ) -> Option<std::sync::Arc<fmaps_nearest::Partition>> {
         if self.nearest_a.len() != rows_a.nrows() {
             return None;
         }
         // (Positions among the samples: below u32::MAX wherever the ball
         // search pays.)
         let labels = self.nearest_a.iter().map(|&j| j as u32).collect();
-        fmaps_nn::Partition::for_balls_from_labels(rows_a, BALLS_MIN_ROWS, labels)
+        fmaps_nearest::Partition::for_balls_from_labels(rows_a, BALLS_MIN_ROWS, labels)
     }
 
     /// The guesses of the full-size search: for every vertex of B, the
@@ -422,7 +422,7 @@ impl ZoomOut {
         // copied into their clusters' order once, each image `Φ Cᵀ`
         // computed in that order; the other side's rows, the queries,
         // checked once.
-        let image_search = |part: &Option<std::sync::Arc<fmaps_nn::Partition>>,
+        let image_search = |part: &Option<std::sync::Arc<fmaps_nearest::Partition>>,
                             rows: &BasisRows| match part {
             Some(p) if !self.adjoint && self.sinkhorn.is_none() => {
                 ImageSearch::new(rows.view(rows.k()), p.clone()).map(Some)
@@ -432,7 +432,7 @@ impl ZoomOut {
         fn checked<'r>(
             search: &Option<ImageSearch>,
             rows: &'r BasisRows,
-        ) -> fmaps_nn::Result<Option<CheckedRows<'r>>> {
+        ) -> fmaps_nearest::Result<Option<CheckedRows<'r>>> {
             search
                 .as_ref()
                 .map(|_| CheckedRows::new(rows.view(rows.k())))
@@ -560,7 +560,7 @@ impl ZoomOut {
                 Ok(match &partition {
                     Some(p) => {
                         let t = Instant::now();
-                        let params = NnParams::with_strategy(fmaps_nn::NnStrategy::Balls)
+                        let params = NnParams::with_strategy(fmaps_nearest::NnStrategy::Balls)
                             .with_partition(p.clone());
                         let map = point_map(c, &all_a, &all_b, conversion, hints, &params)?;
                         searches += 1;
@@ -609,8 +609,8 @@ fn balls_partitions(
     b: &BasisRows,
     bijective: bool,
 ) -> (
-    Option<std::sync::Arc<fmaps_nn::Partition>>,
-    Option<std::sync::Arc<fmaps_nn::Partition>>,
+    Option<std::sync::Arc<fmaps_nearest::Partition>>,
+    Option<std::sync::Arc<fmaps_nearest::Partition>>,
 ) {
     if sinkhorn.is_some() {
         return (None, None);
@@ -653,17 +653,17 @@ const BALLS_MIN_ROWS: usize = 1024;
 /// k-means clusters of the rows `r` (one per ~24 rows) for the ball search
 /// (`NnStrategy::Balls`: exact, and where there are no matrix tiles the
 /// fastest search of a linear image of these rows with guesses), when it
-/// pays ([`fmaps_nn::Partition::for_balls`]: 1024-250,000 rows, with
-/// matrix tiles from `fmaps_nn::TILED_BALLS_FROM_ROWS`, `FMAPS_NO_BALLS`
+/// pays ([`fmaps_nearest::Partition::for_balls`]: 1024-250,000 rows, with
+/// matrix tiles from `fmaps_nearest::TILED_BALLS_FROM_ROWS`, `FMAPS_NO_BALLS`
 /// unset).
-pub(crate) fn balls_partition(r: &BasisRows) -> Option<std::sync::Arc<fmaps_nn::Partition>> {
-    fmaps_nn::Partition::for_balls(r.view(r.k()), BALLS_MIN_ROWS)
+pub(crate) fn balls_partition(r: &BasisRows) -> Option<std::sync::Arc<fmaps_nearest::Partition>> {
+    fmaps_nearest::Partition::for_balls(r.view(r.k()), BALLS_MIN_ROWS)
 }
 
 /// [`balls_partition`] with `steps` Lloyd steps (ICP's).
 pub(crate) fn balls_partition_steps(
     r: &BasisRows,
     steps: usize,
-) -> Option<std::sync::Arc<fmaps_nn::Partition>> {
-    fmaps_nn::Partition::for_balls_with_steps(r.view(r.k()), BALLS_MIN_ROWS, steps)
+) -> Option<std::sync::Arc<fmaps_nearest::Partition>> {
+    fmaps_nearest::Partition::for_balls_with_steps(r.view(r.k()), BALLS_MIN_ROWS, steps)
 }

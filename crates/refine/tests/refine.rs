@@ -5,8 +5,8 @@
 
 use fmaps_eigensolve::SpectralBasis;
 use fmaps_mesh_io::TriMesh;
-use fmaps_mesh_io::generate::torus;
 use fmaps_refine::{Error, Icp, Refiner, Subsample, ZoomOut, farthest_point_sampling};
+use fmaps_shapes::torus;
 use fmaps_solve::{fmap_from_point_map, point_map_from_fmap};
 use nalgebra::DMatrix;
 
@@ -578,7 +578,7 @@ fn the_repair_keeps_an_exact_map_and_repairs_a_noisy_one() {
             .is_err()
     );
     // Geometry that does not belong to the bases is refused.
-    let tiny = fmaps_mesh_io::generate::icosphere(1.0, 1);
+    let tiny = fmaps_shapes::icosphere(1.0, 1);
     assert!(
         Repair::default()
             .refine_with_geometry(&c, &p.basis_a, &p.basis_b, geometry(&tiny), geometry(&p.b))
@@ -625,7 +625,7 @@ fn renumbered_copy(
 
 #[test]
 fn smooth_shells_finds_the_identity_and_a_rotated_renumbered_copy() {
-    use fmaps_mesh_io::generate::{Pose, creature};
+    use fmaps_shapes::{Pose, creature};
     let a = creature(3, &Pose::walking());
     let n = a.n_vertices();
     // B: A turned by 110 degrees about a tilted axis, moved, renumbered.
@@ -676,7 +676,7 @@ fn smooth_shells_finds_the_identity_and_a_rotated_renumbered_copy() {
         shells().refine_with_geometry(&id, &small, &bb, geometry(&a), geometry(&b)),
         Err(Error::NotEnoughEigenpairs { needed: 49, .. })
     ));
-    let tiny = fmaps_mesh_io::generate::icosphere(1.0, 1);
+    let tiny = fmaps_shapes::icosphere(1.0, 1);
     assert!(
         shells()
             .refine_with_geometry(&id, &ba, &bb, geometry(&tiny), geometry(&b))
@@ -686,7 +686,7 @@ fn smooth_shells_finds_the_identity_and_a_rotated_renumbered_copy() {
 
 #[test]
 fn smooth_shells_reflects_for_a_mirrored_copy_and_the_orientation_score_tells() {
-    use fmaps_mesh_io::generate::{Pose, creature};
+    use fmaps_shapes::{Pose, creature};
     // B: the mirror image (x -> -x, faces turned to stay outward) of an
     // asymmetric creature, renumbered. The true map reverses orientation.
     let a = creature(3, &Pose::walking());

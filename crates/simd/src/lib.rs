@@ -159,7 +159,7 @@ pub fn at_every_level(mut f: impl FnMut(SimdLevel)) {
 /// whole process (`None`: no cap), e.g. to test or time the AVX2 or the
 /// baseline kernels on an AVX-512 CPU; overrides `FMAPS_SIMD`. Kernels
 /// without FMA at the baseline level may round differently (see
-/// [`SimdLevel::mul_add`]); exact searches (fmaps-nn) return the same
+/// [`SimdLevel::mul_add`]); exact searches (fmaps-nearest) return the same
 /// rows at every level. faer's own GEMMs dispatch on their own and are
 /// not affected.
 pub fn set_simd_cap(level: Option<SimdLevel>) {

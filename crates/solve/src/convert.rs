@@ -11,7 +11,7 @@
 use faer::linalg::matmul::matmul;
 use faer::{Accum, Mat, MatMut, MatRef, Par};
 use fmaps_eigensolve::SpectralBasis;
-use fmaps_nn::{NnParams, nearest_rows};
+use fmaps_nearest::{NnParams, nearest_rows};
 use nalgebra::DMatrix;
 use rayon::prelude::*;
 

@@ -16,7 +16,7 @@
 //! use fmaps_solve::{fmap_from_point_map, point_map_from_fmap};
 //! # use fmaps_eigensolve::{EigenProblem, EigenSolver, NativeSolver};
 //! # use fmaps_laplacian::{cotan_laplacian, LaplacianParams};
-//! # let mesh = fmaps_mesh_io::generate::torus(2.0, 0.7, 20, 9);
+//! # let mesh = fmaps_shapes::torus(2.0, 0.7, 20, 9);
 //! # let op = cotan_laplacian(&mesh, &LaplacianParams::default());
 //! # let basis = NativeSolver::default().solve(&EigenProblem::new(op.stiffness.view(), &op.mass)?, 20)?;
 //! // The identity map of a shape to itself is the identity functional map,
@@ -78,7 +78,7 @@ pub enum Error {
     NotPositiveDefinite,
     /// The nearest-neighbour search refused its input (empty shapes).
     #[error("nearest-neighbour search: {0}")]
-    Search(fmaps_nn::Error),
+    Search(fmaps_nearest::Error),
     /// A parameter is out of its range.
     #[error("{0}")]
     InvalidParameter(String),
@@ -152,9 +152,10 @@ fn convert_once(
     // (`coarse_ball_size`): the searched rows (`Φ_A Cᵀ` or `Φ_A`) are a
     // linear image of them, and a search without guesses otherwise
     // compares most pairs (README: the 80k initial point map).
-    let params = match fmaps_nn::Partition::for_one_search(rows_a.view(ka), BALLS_FROM_ROWS) {
-        Some(p) => fmaps_nn::NnParams::with_strategy(fmaps_nn::NnStrategy::Balls).with_partition(p),
-        None => fmaps_nn::NnParams::default(),
+    let params = match fmaps_nearest::Partition::for_one_search(rows_a.view(ka), BALLS_FROM_ROWS) {
+        Some(p) => fmaps_nearest::NnParams::with_strategy(fmaps_nearest::NnStrategy::Balls)
+            .with_partition(p),
+        None => fmaps_nearest::NnParams::default(),
     };
     convert::point_map(c_ab, &rows_a, &rows_b, conversion, None, &params)
 }

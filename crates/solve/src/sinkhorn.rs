@@ -33,7 +33,7 @@
 //! ```
 
 use faer::MatRef;
-use fmaps_nn::k_nearest_rows;
+use fmaps_nearest::k_nearest_rows;
 
 use crate::{Error, Result};
 

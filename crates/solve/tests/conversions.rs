@@ -65,7 +65,7 @@ fn bad_sizes_are_errors() {
     nan[(3, 4)] = f64::NAN;
     assert!(matches!(
         point_map_from_fmap(&nan, &b, &b),
-        Err(Error::Search(fmaps_nn::Error::NonFinite { .. }))
+        Err(Error::Search(fmaps_nearest::Error::NonFinite { .. }))
     ));
     assert!(matches!(
         fmap_from_point_map(&[0, 1], &b, &b),
@@ -230,8 +230,8 @@ fn pullback_update_equals_the_direct_pullback() {
 /// embeddings, both directions of conversion.
 #[test]
 fn large_conversions_equal_the_brute_force_search() {
-    use fmaps_nn::{NnParams, NnStrategy, nearest_rows};
-    if fmaps_nn::tiles_available() {
+    use fmaps_nearest::{NnParams, NnStrategy, nearest_rows};
+    if fmaps_nearest::tiles_available() {
         eprintln!(
             "skipped in part: this CPU has matrix tiles, so the conversion searched with them, not with the clusters"
         );
@@ -254,13 +254,19 @@ fn large_conversions_equal_the_brute_force_search() {
     let rows_b = bb.eigenvectors.clone();
     // Direct: data Φ_A Cᵀ, queries Φ_B.
     let data = &rows_a * c.transpose();
-    let want = nearest_rows(fmaps_nn::view(&data), fmaps_nn::view(&rows_b), None, &brute).unwrap();
+    let want = nearest_rows(
+        fmaps_nearest::view(&data),
+        fmaps_nearest::view(&rows_b),
+        None,
+        &brute,
+    )
+    .unwrap();
     assert_eq!(point_map_from_fmap(&c, &ba, &bb).unwrap(), want);
     // Adjoint: data Φ_A, queries Φ_B C.
     let queries = &rows_b * &c;
     let want = nearest_rows(
-        fmaps_nn::view(&rows_a),
-        fmaps_nn::view(&queries),
+        fmaps_nearest::view(&rows_a),
+        fmaps_nearest::view(&queries),
         None,
         &brute,
     )

@@ -1,7 +1,7 @@
 //! Descriptor multiplication and orientation operators on real meshes.
 
 use fmaps_mesh_io::TriMesh;
-use fmaps_mesh_io::generate::grid;
+use fmaps_shapes::grid;
 use fmaps_solve::*;
 use nalgebra::DMatrix;
 

@@ -8,7 +8,7 @@
 //!
 //! ```
 //! use fmaps_viz::{Image, View, position_colors, push_colors, render};
-//! let mesh = fmaps_mesh_io::generate::icosphere(1.0, 2);
+//! let mesh = fmaps_shapes::icosphere(1.0, 2);
 //! let (v, f) = (mesh.vertices(), mesh.faces());
 //! // Colour transfer through the identity map: both sides look the same.
 //! let source = position_colors(v);

@@ -85,7 +85,7 @@ impl View {
 ///
 /// ```
 /// use fmaps_viz::{View, render};
-/// let mesh = fmaps_mesh_io::generate::icosphere(1.0, 2);
+/// let mesh = fmaps_shapes::icosphere(1.0, 2);
 /// let colors = vec![[200, 60, 40]; mesh.n_vertices()];
 /// let img = render(mesh.vertices(), mesh.faces(), &colors, &View::default())?;
 /// // The sphere fills the middle of the picture; the corner is background.

@@ -53,7 +53,7 @@ pub fn run_in(dir: &std::path::Path, base: &[&str], extra: &[&str]) -> (Option<i
 /// identity as ground truth g.vts and map id.map, and shift.map, one step
 /// (0.25) to the right except on the last column (mean error 0.25 * 20/25).
 pub fn grid_fixture(dir: &std::path::Path) -> (fmaps::mesh_io::TriMesh, Vec<usize>) {
-    let m = fmaps::mesh_io::generate::grid(1.0, 1.0, 4, 4);
+    let m = fmaps::shapes::grid(1.0, 1.0, 4, 4);
     fmaps::mesh_io::write_mesh(dir.join("g.off"), &m).unwrap();
     let n = m.n_vertices();
     let all: Vec<usize> = (0..n).collect();

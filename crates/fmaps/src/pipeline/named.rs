@@ -251,7 +251,7 @@ pub fn default_starts(kind: RefinerKind, k_process: usize) -> Vec<usize> {
 /// mean error of the unsampled run (x100: 1.926 against 1.929), where
 /// 5000 gave 1.964, worse on five of the six pairs, and two more
 /// iterations on every vertex after the 5000 samples' did not close the
-/// gap (README, "Speed against issue 20's targets").
+/// gap (docs/benchmarks.md, "Large meshes: sampled refinement").
 pub const AUTO_REFINE_SAMPLES: usize = 10_000;
 
 /// Vertices of the larger mesh above which [`default_refine_samples`]

@@ -87,7 +87,7 @@ pub(super) fn initial_map(
     b: &PreparedShape,
     params: &MatchParams,
 ) -> Result<Vec<usize>, MatchError> {
-    use crate::nn::{NnParams, NnStrategy};
+    use crate::nearest::{NnParams, NnStrategy};
     use crate::solve::convert::{BasisRows, Conversion, point_map};
     let k = c_ba.ncols();
     if let Refinement::ZoomOut { zoomout, .. } = &params.refine

@@ -5,7 +5,7 @@
 
 use nalgebra::{Matrix3, Vector3};
 
-use super::level::v3;
+use super::shell::v3;
 
 /// Per-vertex ARAP rotations from `rest` to `cur` (one-ring Procrustes).
 pub(super) fn rotations(

@@ -1,15 +1,18 @@
 //! One level of the Smooth Shells alignment: shells, product embedding,
 //! correspondences, deformation and functional map (the points and
 //! normals it reads: [`super::posed`]; the ARAP rotations:
-//! [`super::arap`]).
+//! [`super::arap`]; the shape that moves: [`super::shell`]).
 
 use faer::MatRef;
-use fmaps_nn::{NnParams, Partition, nearest_rows, nearest_rows_both};
+use fmaps_nearest::{NnParams, Partition, nearest_rows, nearest_rows_both};
 use nalgebra::{DMatrix, Matrix3, Vector3};
 
 use super::arap::rotations;
-use super::posed::orientation;
+use super::posed::BALLS_FROM_ROWS;
 pub(crate) use super::posed::{AtSamples, Posed, Samples};
+use super::shell::Shell;
+pub(crate) use super::shell::view;
+use super::shell::{mul_ref, v3};
 use crate::icp::nearest_orthonormal;
 use crate::{RefineReport, Result};
 
@@ -27,171 +30,6 @@ pub(crate) fn shell_weights(k: usize) -> Vec<f64> {
     (-(k as i64 - 1)..=half as i64)
         .map(|j| 1.0 / (1.0 + (t * j as f64).exp()))
         .collect()
-}
-
-/// A shape prepared for the alignment: normalised vertices, basis, mass.
-#[derive(Clone)]
-pub(crate) struct Shell<'a> {
-    /// Vertices, centred at the area-weighted centroid and scaled to unit
-    /// area (and, for the shape that moves, rotated by the rigid step).
-    pub verts: Vec<[f64; 3]>,
-    pub faces: &'a [[usize; 3]],
-    /// Φ (n x K), M-orthonormal.
-    pub phi: &'a DMatrix<f64>,
-    pub mass: &'a [f64],
-    /// Eigenvalues times the shape's area (scale-free).
-    pub evals: Vec<f64>,
-    /// Φᵀ M V (K x 3): the spectral coefficients of the coordinates.
-    pub xi: DMatrix<f64>,
-    /// Per vertex, the neighbours (for ARAP).
-    pub neighbours: Vec<Vec<usize>>,
-    /// The sign orienting its normals outwards ([`orientation`] of
-    /// `verts`; a reflection flips it).
-    pub orient: f64,
-}
-
-impl<'a> Shell<'a> {
-    pub fn new(
-        verts: &[[f64; 3]],
-        faces: &'a [[usize; 3]],
-        phi: &'a DMatrix<f64>,
-        mass: &'a [f64],
-        evals: &[f64],
-    ) -> Shell<'a> {
-        let area = surface_area(verts, faces).max(f64::MIN_POSITIVE);
-        let total: f64 = mass.iter().sum();
-        let mut c = [0.0; 3];
-        for (v, &m) in verts.iter().zip(mass) {
-            for d in 0..3 {
-                c[d] += m * v[d] / total;
-            }
-        }
-        let s = 1.0 / area.sqrt();
-        let verts: Vec<[f64; 3]> = verts
-            .iter()
-            .map(|v| [(v[0] - c[0]) * s, (v[1] - c[1]) * s, (v[2] - c[2]) * s])
-            .collect();
-        let mut neighbours = vec![Vec::new(); verts.len()];
-        for f in faces {
-            for e in 0..3 {
-                let (i, j) = (f[e], f[(e + 1) % 3]);
-                if !neighbours[i].contains(&j) {
-                    neighbours[i].push(j);
-                    neighbours[j].push(i);
-                }
-            }
-        }
-        let mut shell = Shell {
-            verts,
-            faces,
-            phi,
-            mass,
-            evals: evals.iter().map(|l| l * total).collect(),
-            xi: DMatrix::zeros(0, 3),
-            neighbours,
-            orient: 1.0,
-        };
-        shell.orient = orientation(&shell.verts, faces);
-        shell.update_xi();
-        shell
-    }
-
-    /// Recomputes Φᵀ M V after the vertices moved.
-    pub fn update_xi(&mut self) {
-        let v = DMatrix::from_fn(self.verts.len(), 3, |r, d| self.mass[r] * self.verts[r][d]);
-        self.xi = mul(self.phi, true, &v);
-    }
-
-    /// A copy rotated by `r`.
-    pub fn clone_rotated(&self, r: &Matrix3<f64>) -> Shell<'a> {
-        let mut s = self.clone();
-        s.rotate(r);
-        s
-    }
-
-    /// Applies a rotation to the vertices (about the origin).
-    pub fn rotate(&mut self, r: &Matrix3<f64>) {
-        for v in &mut self.verts {
-            let p = r * Vector3::new(v[0], v[1], v[2]);
-            *v = [p[0], p[1], p[2]];
-        }
-        self.orient = orientation(&self.verts, self.faces);
-        self.update_xi();
-    }
-
-    /// The shell with weights `w`: `Φ[:, :k'] diag(w) ξ[:k']`.
-    pub fn shell(&self, w: &[f64]) -> Vec<[f64; 3]> {
-        let kk = w.len().min(self.phi.ncols());
-        let coef = DMatrix::from_fn(kk, 3, |i, d| w[i] * self.xi[(i, d)]);
-        points(&mul_ref(view(self.phi, kk), false, view(&coef, 3)))
-    }
-
-    /// `base + Φ[:, :k] τ[:k]`.
-    pub fn deform(&self, base: &[[f64; 3]], tau: &DMatrix<f64>, k: usize) -> Vec<[f64; 3]> {
-        let k = k.min(tau.nrows()).min(self.phi.ncols());
-        let d = mul_ref(view(self.phi, k), false, view(tau, 3).subrows(0, k));
-        base.iter()
-            .enumerate()
-            .map(|(r, b)| [b[0] + d[(r, 0)], b[1] + d[(r, 1)], b[2] + d[(r, 2)]])
-            .collect()
-    }
-}
-
-/// `a b` (or `aᵀ b` with `transpose_a`) by faer's GEMM.
-pub(crate) fn mul(a: &DMatrix<f64>, transpose_a: bool, b: &DMatrix<f64>) -> DMatrix<f64> {
-    mul_ref(view(a, a.ncols()), transpose_a, view(b, b.ncols()))
-}
-
-/// The first `k` columns of `m` as a faer view (no copy: a column-major
-/// matrix's leading columns are a prefix of its storage).
-pub(crate) fn view(m: &DMatrix<f64>, k: usize) -> faer::MatRef<'_, f64> {
-    faer::MatRef::from_column_major_slice(&m.as_slice()[..m.nrows() * k], m.nrows(), k)
-}
-
-/// [`mul`] on faer views.
-pub(super) fn mul_ref(
-    a: faer::MatRef<'_, f64>,
-    transpose_a: bool,
-    b: faer::MatRef<'_, f64>,
-) -> DMatrix<f64> {
-    use faer::linalg::matmul::matmul;
-    let a = if transpose_a { a.transpose() } else { a };
-    let mut out = DMatrix::zeros(a.nrows(), b.ncols());
-    let par = if a.nrows() * a.ncols() * b.ncols() >= 1 << 20 {
-        faer::Par::rayon(0)
-    } else {
-        faer::Par::Seq
-    };
-    matmul(
-        faer::MatMut::from_column_major_slice_mut(out.as_mut_slice(), a.nrows(), b.ncols()),
-        faer::Accum::Replace,
-        a,
-        b,
-        1.0,
-        par,
-    );
-    out
-}
-
-fn points(m: &DMatrix<f64>) -> Vec<[f64; 3]> {
-    (0..m.nrows())
-        .map(|r| [m[(r, 0)], m[(r, 1)], m[(r, 2)]])
-        .collect()
-}
-
-/// Total area of a triangle mesh.
-pub(crate) fn surface_area(verts: &[[f64; 3]], faces: &[[usize; 3]]) -> f64 {
-    faces
-        .iter()
-        .map(|f| {
-            let (a, b, c) = (v3(verts[f[0]]), v3(verts[f[1]]), v3(verts[f[2]]));
-            0.5 * (b - a).cross(&(c - a)).norm()
-        })
-        .sum()
-}
-
-pub(super) fn v3(p: [f64; 3]) -> Vector3<f64> {
-    Vector3::new(p[0], p[1], p[2])
 }
 
 /// The normals' weight in the product space: `normals` times the ratio
@@ -321,12 +159,6 @@ pub(crate) struct Alignment {
     pub cfix: Option<DMatrix<f64>>,
 }
 
-/// Rows of a product embedding from which [`search_params`] takes the
-/// ball search: above the default samples (2000), so the final point map
-/// on every vertex (docs/tuning.md: neutral at 5k vertices, much faster
-/// at 20k and 80k, the same maps).
-pub(super) const BALLS_FROM_ROWS: usize = 4096;
-
 /// Columns of a product embedding from which [`search_params`] takes the
 /// ball search with guesses: below, brute force's fused kernel (up to 32
 /// columns) was faster even with guesses (the 5k default's
@@ -345,7 +177,7 @@ pub(super) const HINTED_BALLS_FROM_COLS: usize = 33;
 ///   docs/tuning.md has the measurement, the same maps);
 /// - without guesses from [`BALLS_FROM_ROWS`] rows (the final point map
 ///   on every vertex), over `cells` or k-means clusters sized for one
-///   search ([`fmaps_nn::Partition::for_one_search`]): positions, normals
+///   search ([`fmaps_nearest::Partition::for_one_search`]): positions, normals
 ///   and spectral features are smooth on the surface, so the clusters are
 ///   compact (FAUST pair subdivided twice, 80k vertices, 197 columns:
 ///   brute force compared all 6.4·10⁹ pairs per finalist).
@@ -353,7 +185,7 @@ pub(super) const HINTED_BALLS_FROM_COLS: usize = 33;
 /// Elsewhere brute force: on a few thousand rows without guesses it
 /// measured twice as fast as the tree the automatic choice takes.
 fn search_params(data: MatRef<'_, f64>, cells: Option<&[u32]>, hinted: bool) -> NnParams {
-    let balls = |p| NnParams::with_strategy(fmaps_nn::NnStrategy::Balls).with_partition(p);
+    let balls = |p| NnParams::with_strategy(fmaps_nearest::NnStrategy::Balls).with_partition(p);
     if hinted
         && data.ncols() >= HINTED_BALLS_FROM_COLS
         && let Some(p) =
@@ -367,7 +199,7 @@ fn search_params(data: MatRef<'_, f64>, cells: Option<&[u32]>, hinted: bool) -> 
     };
     match partition {
         Some(p) => balls(p),
-        None => NnParams::with_strategy(fmaps_nn::NnStrategy::Brute),
+        None => NnParams::with_strategy(fmaps_nearest::NnStrategy::Brute),
     }
 }
 
@@ -425,7 +257,7 @@ pub(crate) fn correspondences(
     let (ab, ba) = if both {
         report.nn_searches += 2;
         let pab = plan(&ey, &ex, sy.cells.as_deref(), hab);
-        let brute = fmaps_nn::NnStrategy::Brute;
+        let brute = fmaps_nearest::NnStrategy::Brute;
         if pab.0.strategy == brute && pba.0.strategy == brute {
             // Both ways from one pass of products (the same answers).
             let (ab, ba) =
@@ -696,5 +528,4 @@ pub(crate) fn alignment_energy(
 }
 
 #[cfg(test)]
-#[path = "level_tests.rs"]
 mod tests;

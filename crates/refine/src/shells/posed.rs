@@ -3,37 +3,17 @@
 //! The samples' one-ring ([`Ring`]) holds what the points and normals at
 //! the samples need, so that the levels without ARAP and the energies
 //! deform and orient a few thousand vertices instead of all of them; the
-//! normals are oriented by the shape's own sign ([`orientation`]).
+//! normals are oriented by the shape's own sign ([`orientation`](super::shell::orientation)).
 
 use nalgebra::DMatrix;
 
-use super::level::{BALLS_FROM_ROWS, Shell, mul_ref, view};
+use super::shell::{Shell, cross, mul_ref, sub, view};
 
-fn sub(p: [f64; 3], q: [f64; 3]) -> [f64; 3] {
-    [p[0] - q[0], p[1] - q[1], p[2] - q[2]]
-}
-
-fn cross(p: [f64; 3], q: [f64; 3]) -> [f64; 3] {
-    [
-        p[1] * q[2] - p[2] * q[1],
-        p[2] * q[0] - p[0] * q[2],
-        p[0] * q[1] - p[1] * q[0],
-    ]
-}
-
-/// The sign that orients a mesh's normals outwards: −1 when its signed
-/// volume is negative (a closed mesh whose faces turn inwards), else 1.
-/// A shape's shells and deformations keep its faces' orientation, so the
-/// sign is the shape's own ([`Shell::orient`]), computed once.
-pub(crate) fn orientation(verts: &[[f64; 3]], faces: &[[usize; 3]]) -> f64 {
-    let mut volume = 0.0;
-    for f in faces {
-        let (a, b, c) = (verts[f[0]], verts[f[1]], verts[f[2]]);
-        let bc = cross(b, c);
-        volume += a[0] * bc[0] + a[1] * bc[1] + a[2] * bc[2];
-    }
-    if volume < 0.0 { -1.0 } else { 1.0 }
-}
+/// Rows of a product embedding from which `level::search_params` takes the
+/// ball search: above the default samples (2000), so the final point map
+/// on every vertex (docs/tuning.md: neutral at 5k vertices, much faster
+/// at 20k and 80k, the same maps).
+pub(super) const BALLS_FROM_ROWS: usize = 4096;
 
 /// `n` scaled to length 1 and oriented by `sign` (0 for a zero vector).
 fn unit(n: [f64; 3], sign: f64) -> [f64; 3] {
@@ -43,7 +23,7 @@ fn unit(n: [f64; 3], sign: f64) -> [f64; 3] {
 }
 
 /// Area-weighted vertex normals (each vertex's faces' cross products
-/// summed in face order), oriented by `sign` ([`orientation`]).
+/// summed in face order), oriented by `sign` ([`orientation`](super::shell::orientation)).
 pub(crate) fn normals(verts: &[[f64; 3]], faces: &[[usize; 3]], sign: f64) -> Vec<[f64; 3]> {
     let mut n = vec![[0.0f64; 3]; verts.len()];
     for f in faces {
@@ -221,7 +201,7 @@ pub(crate) struct Samples<'a> {
     /// Their one-ring ([`Samples::pose`]; none for every vertex).
     ring: Option<Ring>,
     /// Clusters of the rows for the ball search among them
-    /// ([`super::level::correspondences`]): patches of ~[`fmaps_nn::BALL_SIZE`]
+    /// ([`super::level::correspondences`]): patches of ~[`fmaps_nearest::BALL_SIZE`]
     /// samples (searched with the previous level's correspondences as
     /// guesses), or of every vertex of a large shape (one search each).
     pub cells: Option<Vec<u32>>,
@@ -238,7 +218,7 @@ impl<'a> Samples<'a> {
             ring: Some(Ring::new(s, &idx)),
             cells: Some(surface_cells(
                 &idx.iter().map(|&i| s.verts[i]).collect::<Vec<_>>(),
-                idx.len().div_ceil(fmaps_nn::BALL_SIZE),
+                idx.len().div_ceil(fmaps_nearest::BALL_SIZE),
             )),
             idx,
         }
@@ -353,7 +333,7 @@ mod tests {
     /// reflected shell's orientation flips.
     #[test]
     fn the_samples_ring_poses_as_every_vertex_does() {
-        let mesh = fmaps_mesh_io::generate::icosphere(1.0, 5);
+        let mesh = fmaps_shapes::icosphere(1.0, 5);
         let (verts, faces) = (mesh.vertices(), mesh.faces());
         let n = verts.len();
         // Any smooth functions as the "basis", a uniform mass.

@@ -5,7 +5,7 @@ use std::time::Instant;
 
 use nalgebra::{Matrix3, Vector3};
 
-use super::level::Shell;
+use super::shell::Shell;
 use crate::{RefineReport, Result};
 
 /// Rotation by `angle` about the unit `axis` (Rodrigues).
@@ -53,10 +53,10 @@ pub(super) fn axis_icp(
     for _ in 0..iterations {
         let qx = pts(x, sx);
         let t = Instant::now();
-        let p = fmaps_nn::NnParams::default();
-        let ab = fmaps_nn::nearest_rows(qy.as_ref(), qx.as_ref(), None, &p)
+        let p = fmaps_nearest::NnParams::default();
+        let ab = fmaps_nearest::nearest_rows(qy.as_ref(), qx.as_ref(), None, &p)
             .map_err(fmaps_solve::Error::Search)?;
-        let ba = fmaps_nn::nearest_rows(qx.as_ref(), qy.as_ref(), None, &p)
+        let ba = fmaps_nearest::nearest_rows(qx.as_ref(), qy.as_ref(), None, &p)
             .map_err(fmaps_solve::Error::Search)?;
         report.nn_searches += 2;
         report.nn_seconds += t.elapsed().as_secs_f64();

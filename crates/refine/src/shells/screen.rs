@@ -5,7 +5,8 @@
 use nalgebra::DMatrix;
 use rayon::prelude::*;
 
-use super::level::{Alignment, Samples, Shell};
+use super::level::{Alignment, Samples};
+use super::shell::Shell;
 use super::{Select, SmoothShells, as_start, merge};
 use crate::{RefineReport, Result};
 

@@ -3,7 +3,7 @@
 use fmaps_eigensolve::{EigenProblem, EigenSolver, NativeSolver, SpectralBasis};
 use fmaps_laplacian::{LaplacianParams, cotan_laplacian};
 use fmaps_mesh_io::TriMesh;
-use fmaps_mesh_io::generate::torus;
+use fmaps_shapes::torus;
 
 /// The first `k` eigenpairs of `mesh`'s cotangent Laplacian (native
 /// solver).

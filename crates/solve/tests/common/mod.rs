@@ -7,7 +7,7 @@
 use fmaps_eigensolve::{EigenProblem, EigenSolver, NativeSolver, SpectralBasis};
 use fmaps_laplacian::{LaplacianParams, cotan_laplacian};
 use fmaps_mesh_io::TriMesh;
-use fmaps_mesh_io::generate::torus;
+use fmaps_shapes::torus;
 
 /// The bumpy torus with `nu x nv` vertices.
 pub fn bumpy(nu: usize, nv: usize) -> TriMesh {
