@@ -146,28 +146,23 @@ fn time<T>(repeat: usize, mut f: impl FnMut() -> T) -> (f64, T) {
 
 fn save(path: &Path, m: &DMatrix<f64>) -> anyhow::Result<()> {
     // Column-major, written as a Fortran-order array.
-    fmaps::npy::save_f64(path, &[m.nrows(), m.ncols()], m.as_slice())
+    fmaps::mesh_io::npy::save_f64(path, &[m.nrows(), m.ncols()], m.as_slice())
         .with_context(|| path.display().to_string())
 }
 
 /// A 1-D little-endian int64 `.npy` file (what `nn.py --out` writes).
 fn load_i64(path: &Path) -> anyhow::Result<Vec<i64>> {
     let bytes = std::fs::read(path).with_context(|| path.display().to_string())?;
-    if bytes.len() < 10 || &bytes[..6] != b"\x93NUMPY" {
-        bail!("{}: not a .npy file", path.display());
+    let a = fmaps::mesh_io::npy::parse_i64(&bytes)
+        .map_err(|(at, m)| anyhow::anyhow!("{}, byte {at}: {m}", path.display()))?;
+    if a.shape.len() != 1 {
+        bail!(
+            "{}: shape {:?}, a 1-D array expected",
+            path.display(),
+            a.shape
+        );
     }
-    let (hlen, start) = match bytes[6] {
-        1 => (u16::from_le_bytes([bytes[8], bytes[9]]) as usize, 10),
-        _ => (u32::from_le_bytes(bytes[8..12].try_into()?) as usize, 12),
-    };
-    let header = std::str::from_utf8(&bytes[start..start + hlen])?;
-    if !header.contains("'<i8'") {
-        bail!("{}: expected int64 data, header {header}", path.display());
-    }
-    Ok(bytes[start + hlen..]
-        .chunks_exact(8)
-        .map(|c| i64::from_le_bytes(c.try_into().expect("8 bytes")))
-        .collect())
+    Ok(a.data)
 }
 
 fn read_indices(path: &Path) -> anyhow::Result<Vec<usize>> {

@@ -28,6 +28,7 @@ mod fit_check;
 mod generated;
 mod geodesic_check;
 mod pictures;
+mod profile;
 mod publish_check;
 mod starts;
 mod test;
@@ -66,6 +67,8 @@ enum Command {
     Figures(figures::Args),
     /// Pictures of one test pair per collection (transfer, errors, C, embedding, curves), into docs/pictures/.
     Pictures(pictures::Args),
+    /// Profiling harnesses (eigen, refine, geodesic, nearest, strategies): one stage repeated on real inputs, for perf and A/B timings.
+    Profile(profile::Args),
     /// Every test: `cargo test --workspace` (tidy tests included), then the nearest-neighbour tests without AMX tiles.
     Test(test::Args),
     /// The parsers' property tests with 10,000 cases each (release build): mesh formats, correspondence and landmark files, option syntaxes, and the CLI's nasty-input corpus.
@@ -92,6 +95,7 @@ fn main() -> anyhow::Result<()> {
         Command::GeodesicCheck(a) => geodesic_check::geodesic_check(&a),
         Command::FitCheck(a) => fit_check::fit_check(&a),
         Command::Figures(a) => figures::figures(&a),
+        Command::Profile(a) => profile::run(a),
         Command::Pictures(a) => pictures::pictures(&a),
         Command::PublishCheck(a) => publish_check::publish_check(&a),
         Command::Test(a) => test::test(&a),

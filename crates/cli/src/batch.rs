@@ -186,7 +186,7 @@ impl Shapes<'_> {
             params.k_process, params.spectrum.mass, params.spectrum.backend, params.area_normalize
         );
         let dir = self.args.out.join("bases");
-        let file = dir.join(format!("{name}-{:016x}.basis", fnv64(key.as_bytes())));
+        let file = dir.join(format!("{name}-{:016x}.npz", fnv64(key.as_bytes())));
         let cached = read_basis(&file)
             .ok()
             .filter(|b| b.key == key && b.n() == mesh.n_vertices())

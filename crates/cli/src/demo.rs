@@ -253,12 +253,7 @@ fn pictures(
     for (mesh, colors, name) in [(a, &cs, "source.ply"), (b, &ct, "target.ply")] {
         let p = out_dir.join(format!("{}{name}", case.prefix));
         staged.stage(&p, |tmp| {
-            Ok(viz::write_colored_ply(
-                tmp,
-                mesh.vertices(),
-                mesh.faces(),
-                colors,
-            )?)
+            Ok(fmaps::mesh_io::save_colored_ply(tmp, mesh, colors)?)
         })?;
         written.push(p.display().to_string());
     }

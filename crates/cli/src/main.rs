@@ -86,8 +86,8 @@ fmaps batch test_pairs.txt --data FAUST/vtx_5k --out faust-maps --corres FAUST/v
 fmaps batch pairs.txt --data meshes --out maps --shard $SLURM_ARRAY_TASK_ID/16 -- --refine zoomout\n  \
 parallel fmaps --threads 1 batch pairs.txt --data meshes --out maps --shard {}/8 ::: $(seq 8)\n\n\
 Writes A_B.map (1-based, as fmaps match --out) and A_B.json per pair, report.jsonl (every\n\
-finished pair of the file, in order) and bases/ (the eigenbasis cache, keyed by the mesh\n\
-file's content and the parameters). Run it again to resume after a kill.")]
+finished pair of the file, in order) and bases/ (the eigenbasis cache, .npz files keyed by\n\
+the mesh file's content and the parameters; np.load reads them). Run it again to resume after a kill.")]
     Batch(batch::BatchArgs),
     /// Refine a point map from elsewhere (another tool, a learned method,
     /// a published benchmark map) with ICP or ZoomOut.

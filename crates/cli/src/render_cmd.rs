@@ -601,12 +601,7 @@ fn save_ply(
     written: &mut Written,
 ) -> Result<(), Failure> {
     written.staged.stage(path, |tmp| {
-        Ok(viz::write_colored_ply(
-            tmp,
-            mesh.vertices(),
-            mesh.faces(),
-            colors,
-        )?)
+        Ok(fmaps::mesh_io::save_colored_ply(tmp, mesh, colors)?)
     })?;
     written.names.push(path.display().to_string());
     Ok(())

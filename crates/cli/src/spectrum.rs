@@ -173,7 +173,9 @@ fn write_basis(files: &[PathBuf; 3], b: &fmaps::eigensolve::SpectralBasis) -> Re
         (&[b.n()], b.mass.as_slice()),
     ];
     for (path, (shape, data)) in files.iter().zip(arrays) {
-        staged.stage(path, |tmp| Ok(fmaps::npy::save_f64(tmp, shape, data)?))?;
+        staged.stage(path, |tmp| {
+            Ok(fmaps::mesh_io::npy::save_f64(tmp, shape, data)?)
+        })?;
     }
     staged.commit()
 }

@@ -15,8 +15,8 @@ use nalgebra::{DMatrix, DVector};
 
 use crate::factor::{Factorization, ShiftInvert};
 use crate::native::default_shift;
-use crate::verify::SplitMix;
 use crate::{EigenProblem, EigenSolver, Error, Result, SolveStats, SpectralBasis};
+use fmaps_simd::SplitMix;
 
 /// ARPACK keeps state in Fortran common blocks (timers, debug levels):
 /// calls from several threads at once are not safe, so they are serialized.
@@ -89,7 +89,7 @@ impl EigenSolver for ArpackSolver {
         let _guard = ARPACK_LOCK.lock().unwrap_or_else(|e| e.into_inner());
         let t0 = Instant::now();
         let mut rng = SplitMix(p.seed);
-        let mut resid: Vec<f64> = (0..n).map(|_| rng.next_f64()).collect();
+        let mut resid: Vec<f64> = (0..n).map(|_| rng.symmetric()).collect();
         let mut v = vec![0.0; n * ncv];
         let mut workd = vec![0.0; 3 * n];
         let mut workl = vec![0.0; lworkl];

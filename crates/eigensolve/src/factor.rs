@@ -329,7 +329,7 @@ pub(crate) fn par_of(threads: usize) -> Par {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::verify::SplitMix;
+    use fmaps_simd::SplitMix;
 
     /// The one-pass solve of up to eight right-hand sides gives faer's
     /// simplicial solve bit for bit (the same operations in the same
@@ -346,7 +346,7 @@ mod tests {
         let mut rng = SplitMix(7);
         fmaps_simd::at_every_level(|level| {
             for ncols in 1..=LANES {
-                let b: Vec<f64> = (0..n * ncols).map(|_| rng.next_f64() - 0.5).collect();
+                let b: Vec<f64> = (0..n * ncols).map(|_| rng.symmetric() - 0.5).collect();
                 let mut ours = b.clone();
                 solve_rows(&st, &f.values, &mut ours, ncols);
                 let mut theirs = b.clone();

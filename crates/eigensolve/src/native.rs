@@ -28,8 +28,8 @@ use fmaps_simd::dot8 as dot;
 use nalgebra::{DMatrix, DVector};
 
 use crate::factor::{Factorization, ShiftInvert, par_of};
-use crate::verify::SplitMix;
 use crate::{EigenProblem, EigenSolver, Error, Result, SolveStats, SpectralBasis};
+use fmaps_simd::SplitMix;
 
 /// Options of the native backend. `Default` converges every eigenpair to
 /// near machine precision (eigenvalues agree with ARPACK's to ~1e-12).
@@ -215,7 +215,7 @@ fn krylov_schur(
 
     // Random start block, orthonormalized.
     for x in &mut v[..n * b] {
-        *x = rng.next_f64();
+        *x = rng.symmetric();
     }
     let mut r = Mat::<f64>::zeros(b, b);
     orthonormalize_block(&mut v, n, 0, b, &mut r, &mut rng);
@@ -639,7 +639,7 @@ fmaps_simd::dispatched! {
             // Dependent column: a random direction orthogonal to columns 0..cj.
             loop {
                 for t in x.iter_mut() {
-                    *t = rng.next_f64();
+                    *t = rng.symmetric();
                 }
                 for _pass in 0..2 {
                     for i in 0..cj {

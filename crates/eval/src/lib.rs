@@ -30,10 +30,18 @@
 //! assert_eq!(r.coverage, 20.0 / 25.0);
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
+//!
+//! # Features
+//!
+//! - `serde`: `Serialize` for the reports.
+//! - `published-maps`: the benchmark's published maps read from their zip
+//!   archives ([`Collection::published_maps`]; the `zip` dependency).
 #![deny(missing_docs)]
 #![forbid(unsafe_code)]
 
 mod dataset;
+#[cfg(feature = "published-maps")]
+mod published;
 pub mod quality;
 
 use std::collections::HashMap;
@@ -43,7 +51,9 @@ use fmaps_geodesic::DistanceSolver;
 use fmaps_mesh_io::TriMesh;
 use rayon::prelude::*;
 
-pub use dataset::{Collection, PublishedMaps};
+pub use dataset::Collection;
+#[cfg(feature = "published-maps")]
+pub use published::PublishedMaps;
 pub use quality::{MapQuality, map_quality};
 
 /// Errors of this crate.

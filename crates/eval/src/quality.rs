@@ -9,6 +9,7 @@
 use fmaps_mesh_io::TriMesh;
 
 use crate::{Error, Result};
+use fmaps_mesh_io::vec3::{cross, dot, norm, sub};
 
 /// The scores of [`map_quality`].
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -184,26 +185,6 @@ fn frame(p: [[f64; 3]; 3], scale: f64) -> [[f64; 2]; 2] {
     let x2 = dot(e2, u);
     let y2 = norm(sub(e2, [u[0] * x2, u[1] * x2, u[2] * x2]));
     [[l1 / scale, x2 / scale], [0.0, y2 / scale]]
-}
-
-fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
-}
-
-fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-}
-
-fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [
-        a[1] * b[2] - a[2] * b[1],
-        a[2] * b[0] - a[0] * b[2],
-        a[0] * b[1] - a[1] * b[0],
-    ]
-}
-
-fn norm(a: [f64; 3]) -> f64 {
-    dot(a, a).sqrt()
 }
 
 #[cfg(test)]

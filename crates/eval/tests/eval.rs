@@ -141,7 +141,9 @@ fn bcicp() -> Option<PathBuf> {
             PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared/datasets")
         })
         .join("bcicp");
-    d.join("FAUST/test_pairs.txt").exists().then_some(d)
+    d.join("TOSCA_Isometric/test_pairs.txt")
+        .exists()
+        .then_some(d)
 }
 
 #[test]

@@ -11,12 +11,15 @@
 //! | [`eval`] | `fmaps-eval` | benchmark protocol: geodesic errors, curves, dataset loader |
 //! | [`descriptors`] | `fmaps-descriptors` | HKS, WKS, landmark descriptors |
 //! | [`solve`] | `fmaps-solve` | functional-map energy and exact solve, map conversions |
-//! | [`refine`] | `fmaps-refine` | ICP, ZoomOut, orientation score |
-//! | [`viz`] | `fmaps-viz` | software rendering to PNG, colour maps, plots, coloured PLY |
+//! | [`nearest`] | `fmaps-nearest` | exact nearest rows in spectral embeddings |
+//! | [`refine`] | `fmaps-refine` | Smooth Shells, ZoomOut, ICP, discrete optimisation, orientation score |
+//! | [`shapes`] | `fmaps-shapes` | shapes generated in code with exact ground truth |
+//! | `viz` | `fmaps-viz` | software rendering to PNG, colour maps, plots (feature `viz`) |
 //!
 //! and provides [`spectrum`], the mesh-to-eigenbasis stage with per-stage
-//! timings, [`pipeline`] ([`match_shapes`]: two meshes to a point map), plus
-//! [`npy`] for handing results to Python and [`pictures`] of a map.
+//! timings, [`pipeline`] ([`match_shapes`]: two meshes to a point map),
+//! [`demo`] (the built-in pairs) and `pictures` of a map (feature `viz`;
+//! NumPy files: [`mesh_io::npy`]).
 //!
 //! ```
 //! use fmaps::{spectrum, SpectrumParams};
@@ -30,11 +33,23 @@
 //! assert!((4..9).all(|i| (ev[i] - 6.0).abs() < 0.05));
 //! # Ok::<(), fmaps::eigensolve::Error>(())
 //! ```
+//!
+//! # Features
+//!
+//! - `viz` (default): `fmaps::viz` and `fmaps::pictures`, pictures of maps
+//!   without a GPU.
+//! - `published-maps` (default): the benchmark's published maps read from
+//!   their zip archives (`fmaps::eval::PublishedMaps`).
+//! - `serde`: `Serialize` for the reports.
+//! - `arpack`: the ARPACK eigensolver backend (needs system libraries).
+//!
+//! A library that only matches shapes can turn the defaults off:
+//! `fmaps = { version = "0.1", default-features = false }`.
 #![deny(missing_docs)]
 #![forbid(unsafe_code)]
 
 pub mod demo;
-pub mod npy;
+#[cfg(feature = "viz")]
 pub mod pictures;
 pub mod pipeline;
 
@@ -51,6 +66,7 @@ pub use fmaps_nearest as nearest;
 pub use fmaps_refine as refine;
 pub use fmaps_shapes as shapes;
 pub use fmaps_solve as solve;
+#[cfg(feature = "viz")]
 pub use fmaps_viz as viz;
 pub use pipeline::{MatchParams, MatchResult, match_shapes};
 

@@ -11,6 +11,7 @@ use fmaps_laplacian::{LaplacianParams, cotan_laplacian_from_lengths, intrinsic_d
 use fmaps_mesh_io::TriMesh;
 
 use crate::{DistanceSolver, Error, Result};
+use fmaps_mesh_io::vec3::{dot, norm, sub};
 
 /// Options of [`HeatSolver`].
 #[derive(Debug, Clone, PartialEq)]
@@ -241,16 +242,4 @@ impl DistanceSolver for HeatSolver {
         self.check(targets)?;
         self.distances(sources)
     }
-}
-
-fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
-}
-
-fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-}
-
-fn norm(a: [f64; 3]) -> f64 {
-    dot(a, a).sqrt()
 }

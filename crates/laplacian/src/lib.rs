@@ -45,6 +45,7 @@
 mod intrinsic;
 
 use fmaps_mesh_io::TriMesh;
+use fmaps_mesh_io::vec3::{cross, dot, norm, sub};
 use sprs::CsMat;
 
 /// Which diagonal mass matrix to build.
@@ -393,24 +394,4 @@ pub(crate) fn triangle_area(l: [f64; 3]) -> f64 {
     let (a, b, c) = (s[0], s[1], s[2]);
     let p = (a + (b + c)) * (c - (a - b)) * (c + (a - b)) * (a + (b - c));
     0.25 * p.max(0.0).sqrt()
-}
-
-fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
-}
-
-fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-}
-
-fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [
-        a[1] * b[2] - a[2] * b[1],
-        a[2] * b[0] - a[0] * b[2],
-        a[0] * b[1] - a[1] * b[0],
-    ]
-}
-
-fn norm(a: [f64; 3]) -> f64 {
-    dot(a, a).sqrt()
 }

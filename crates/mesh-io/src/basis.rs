@@ -3,18 +3,29 @@
 //! of the mesh file and the parameters), so that a collection computes
 //! each shape's basis once across all its pairs and across runs.
 //!
-//! Layout (little-endian): the magic line `FMAPS-BASIS-1\n`, the key's
-//! length (u32) and bytes (UTF-8, at most [`MAX_KEY`]), `n` and `k` (u64),
-//! then `k` eigenvalues, `n` mass entries and the `n x k` eigenvectors
-//! column by column (f64). A file is accepted only if its length is
-//! exactly what its header announces and every value is finite.
+//! A cache file is a NumPy `.npz` archive ([`crate::npz`]), readable with
+//! NumPy alone:
+//!
+//! ```python
+//! z = np.load("tr_reg_000-....npz")
+//! phi, evals, mass = z["eigenvectors"], z["eigenvalues"], z["mass"]   # n x k, (k,), (n,)
+//! key = bytes(z["key"]).decode()
+//! ```
+//!
+//! Entries: `format` (the bytes `fmaps-basis-2`), `key` (UTF-8 bytes, at
+//! most [`MAX_KEY`]), `eigenvalues` (k), `mass` (n) and `eigenvectors`
+//! (n x k, float64). A file is accepted only if every entry is present,
+//! its CRC-32 and sizes agree, the shapes fit together and every value is
+//! finite: a truncated file, a damaged one or one of another format is an
+//! error (the caller recomputes), never a basis.
 
 use std::io::Write;
 use std::path::Path;
 
-use crate::{Error, Location, Result};
+use crate::{Error, Location, Result, npy, npz};
 
-const MAGIC: &[u8] = b"FMAPS-BASIS-1\n";
+/// The `format` entry of the files this version writes and reads.
+const FORMAT: &[u8] = b"fmaps-basis-2";
 
 /// Longest key stored.
 pub const MAX_KEY: usize = 4096;
@@ -47,15 +58,9 @@ impl BasisFile {
     }
 }
 
-/// Writes `b` to `path` atomically (whole or not at all).
-pub fn write_basis(path: impl AsRef<Path>, b: &BasisFile) -> Result<()> {
-    let path = path.as_ref();
-    let bad = |m: String| {
-        Error::io(
-            path,
-            std::io::Error::new(std::io::ErrorKind::InvalidInput, m),
-        )
-    };
+/// The bytes of a cache file (an `.npz` archive) holding `b`.
+pub fn basis_bytes(b: &BasisFile) -> std::io::Result<Vec<u8>> {
+    let bad = |m: String| std::io::Error::new(std::io::ErrorKind::InvalidInput, m);
     if b.key.len() > MAX_KEY {
         return Err(bad(format!(
             "key of {} bytes (at most {MAX_KEY})",
@@ -70,103 +75,108 @@ pub fn write_basis(path: impl AsRef<Path>, b: &BasisFile) -> Result<()> {
             b.k()
         )));
     }
-    crate::atomic::write_atomically(path, |w: &mut dyn Write| {
-        w.write_all(MAGIC)?;
-        w.write_all(&(b.key.len() as u32).to_le_bytes())?;
-        w.write_all(b.key.as_bytes())?;
-        w.write_all(&(b.n() as u64).to_le_bytes())?;
-        w.write_all(&(b.k() as u64).to_le_bytes())?;
-        for v in b.eigenvalues.iter().chain(&b.mass).chain(&b.vectors) {
-            w.write_all(&v.to_le_bytes())?;
-        }
-        Ok(())
-    })
-    .map_err(|e| Error::io(path, e))
+    let (mut format, mut key, mut evals, mut mass, mut vectors) =
+        (Vec::new(), Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    npy::write_u8(&mut format, FORMAT)?;
+    npy::write_u8(&mut key, b.key.as_bytes())?;
+    npy::write_f64(&mut evals, &[b.k()], &b.eigenvalues)?;
+    npy::write_f64(&mut mass, &[b.n()], &b.mass)?;
+    npy::write_f64(&mut vectors, &[b.n(), b.k()], &b.vectors)?;
+    let mut out = Vec::with_capacity(vectors.len() + mass.len() + 1024);
+    npz::write_archive(
+        &mut out,
+        &[
+            ("format.npy", &format),
+            ("key.npy", &key),
+            ("eigenvalues.npy", &evals),
+            ("mass.npy", &mass),
+            ("eigenvectors.npy", &vectors),
+        ],
+    )?;
+    Ok(out)
+}
+
+/// Writes `b` to `path` atomically (whole or not at all).
+pub fn write_basis(path: impl AsRef<Path>, b: &BasisFile) -> Result<()> {
+    let path = path.as_ref();
+    let bytes = basis_bytes(b).map_err(|e| Error::io(path, e))?;
+    crate::atomic::write_atomically(path, |w: &mut dyn Write| w.write_all(&bytes))
+        .map_err(|e| Error::io(path, e))
 }
 
 /// Reads a cache file written by [`write_basis`]; any other content is a
-/// parse error naming the byte where it went wrong.
+/// parse error naming the byte (or the entry) where it went wrong.
 pub fn read_basis(path: impl AsRef<Path>) -> Result<BasisFile> {
     let path = path.as_ref();
     let data = crate::read_bounded(path, MAX_BASIS_BYTES)?;
     parse_basis(&data).map_err(|(at, message)| Error::Parse {
         path: Some(path.to_path_buf()),
-        format: "basis cache",
+        format: "basis cache (.npz)",
         location: at.map_or(Location::End, Location::Byte),
         message,
     })
 }
 
-/// [`read_basis`] on bytes: the error's byte offset (`None`: the end).
+/// [`read_basis`] on bytes: the error's byte offset (`None`: the whole
+/// archive or an entry's content).
 pub fn parse_basis(data: &[u8]) -> std::result::Result<BasisFile, (Option<usize>, String)> {
-    let mut at = 0usize;
-    let mut take =
-        |len: usize, what: &str| -> std::result::Result<&[u8], (Option<usize>, String)> {
-            let end = at
-                .checked_add(len)
-                .filter(|&e| e <= data.len())
-                .ok_or((None, format!("the file ends inside the {what}")))?;
-            let s = &data[at..end];
-            at = end;
-            Ok(s)
-        };
-    if take(MAGIC.len(), "header")? != MAGIC {
+    let entries = npz::read_archive(data).map_err(|(at, m)| (Some(at), m))?;
+    let entry = |name: &str| {
+        entries
+            .iter()
+            .find(|e| e.name == format!("{name}.npy"))
+            .map(|e| e.data)
+            .ok_or((None, format!("no `{name}` entry: not an fmaps basis cache")))
+    };
+    let in_entry = |name: &'static str| {
+        move |(at, m): (usize, String)| (None, format!("{name}, byte {at}: {m}"))
+    };
+    let format = npy::parse_u8(entry("format")?).map_err(in_entry("format"))?;
+    if format != FORMAT {
         return Err((
-            Some(0),
-            "not an fmaps basis cache file (bad magic line)".into(),
-        ));
-    }
-    let key_len = u32::from_le_bytes(take(4, "key length")?.try_into().expect("4")) as usize;
-    if key_len > MAX_KEY {
-        return Err((
-            Some(MAGIC.len()),
-            format!("key of {key_len} bytes (at most {MAX_KEY})"),
-        ));
-    }
-    let key = std::str::from_utf8(take(key_len, "key")?)
-        .map_err(|_| (Some(MAGIC.len() + 4), "the key is not UTF-8".to_string()))?
-        .to_string();
-    let sizes_at = MAGIC.len() + 4 + key_len;
-    let n = u64::from_le_bytes(take(8, "sizes")?.try_into().expect("8"));
-    let k = u64::from_le_bytes(take(8, "sizes")?.try_into().expect("8"));
-    // The announced length must be the file's: nothing is allocated for
-    // sizes the file does not hold.
-    let values = n
-        .checked_mul(k)
-        .and_then(|nk| nk.checked_add(n))
-        .and_then(|v| v.checked_add(k))
-        .filter(|v| {
-            v.checked_mul(8)
-                .is_some_and(|b| b == (data.len() - (sizes_at + 16)) as u64)
-        })
-        .ok_or((
-            Some(sizes_at),
+            None,
             format!(
-                "n = {n}, k = {k} need {} bytes of values, the file has {}",
-                n.saturating_mul(k)
-                    .saturating_add(n)
-                    .saturating_add(k)
-                    .saturating_mul(8),
-                data.len() - (sizes_at + 16)
+                "format {:?}, this version reads {:?}",
+                String::from_utf8_lossy(&format),
+                String::from_utf8_lossy(FORMAT)
             ),
-        ))? as usize;
-    let start = sizes_at + 16;
-    let mut out = Vec::with_capacity(values);
-    for (i, c) in data[start..].chunks_exact(8).enumerate() {
-        let v = f64::from_le_bytes(c.try_into().expect("8"));
-        if !v.is_finite() {
-            return Err((Some(start + 8 * i), format!("value {v} is not finite")));
-        }
-        out.push(v);
+        ));
     }
-    let (n, k) = (n as usize, k as usize);
-    let vectors = out.split_off(n + k);
-    let mass = out.split_off(k);
+    let key = npy::parse_u8(entry("key")?).map_err(in_entry("key"))?;
+    if key.len() > MAX_KEY {
+        return Err((
+            None,
+            format!("key of {} bytes (at most {MAX_KEY})", key.len()),
+        ));
+    }
+    let key = String::from_utf8(key).map_err(|_| (None, "the key is not UTF-8".to_string()))?;
+    let evals = npy::parse_f64(entry("eigenvalues")?).map_err(in_entry("eigenvalues"))?;
+    let mass = npy::parse_f64(entry("mass")?).map_err(in_entry("mass"))?;
+    let vectors = npy::parse_f64(entry("eigenvectors")?).map_err(in_entry("eigenvectors"))?;
+    let (n, k) = (mass.data.len(), evals.data.len());
+    if evals.shape.len() != 1 || mass.shape.len() != 1 || vectors.shape != [n, k] {
+        return Err((
+            None,
+            format!(
+                "shapes do not fit: eigenvalues {:?}, mass {:?}, eigenvectors {:?}",
+                evals.shape, mass.shape, vectors.shape
+            ),
+        ));
+    }
+    for (name, a) in [
+        ("eigenvalues", &evals),
+        ("mass", &mass),
+        ("eigenvectors", &vectors),
+    ] {
+        if let Some((i, v)) = a.data.iter().enumerate().find(|(_, v)| !v.is_finite()) {
+            return Err((None, format!("{name}[{i}] = {v} is not finite")));
+        }
+    }
     Ok(BasisFile {
         key,
-        eigenvalues: out,
-        mass,
-        vectors,
+        eigenvalues: evals.data,
+        mass: mass.data,
+        vectors: vectors.data,
     })
 }
 
@@ -187,43 +197,62 @@ mod tests {
     fn a_basis_round_trips() {
         let dir = std::env::temp_dir().join(format!("fmaps-basis-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
-        let p = dir.join("b.basis");
+        let p = dir.join("b.npz");
         write_basis(&p, &sample()).unwrap();
         assert_eq!(read_basis(&p).unwrap(), sample());
         std::fs::remove_dir_all(&dir).unwrap();
     }
 
     #[test]
-    fn damaged_files_are_errors_naming_the_byte() {
-        let mut bytes = Vec::new();
-        bytes.extend_from_slice(MAGIC);
-        let b = sample();
-        bytes.extend_from_slice(&(b.key.len() as u32).to_le_bytes());
-        bytes.extend_from_slice(b.key.as_bytes());
-        bytes.extend_from_slice(&2u64.to_le_bytes());
-        bytes.extend_from_slice(&3u64.to_le_bytes());
-        for v in b.eigenvalues.iter().chain(&b.mass).chain(&b.vectors) {
-            bytes.extend_from_slice(&v.to_le_bytes());
-        }
-        assert_eq!(parse_basis(&bytes).unwrap(), b);
+    fn damaged_files_are_errors() {
+        let bytes = basis_bytes(&sample()).unwrap();
+        assert_eq!(parse_basis(&bytes).unwrap(), sample());
         // Truncated anywhere: an error, never a panic.
         for cut in 0..bytes.len() {
             assert!(parse_basis(&bytes[..cut]).is_err(), "cut at {cut}");
         }
-        // Sizes that would need more than the file holds (no allocation).
-        let mut huge = bytes.clone();
-        let sizes = MAGIC.len() + 4 + b.key.len();
-        huge[sizes..sizes + 8].copy_from_slice(&u64::MAX.to_le_bytes());
-        let (at, msg) = parse_basis(&huge).unwrap_err();
-        assert_eq!(at, Some(sizes), "{msg}");
-        // A NaN is named by its byte.
-        let mut nan = bytes.clone();
-        let last = nan.len() - 8;
-        nan[last..].copy_from_slice(&f64::NAN.to_le_bytes());
-        assert_eq!(parse_basis(&nan).unwrap_err().0, Some(last));
-        assert_eq!(parse_basis(b"OFF\n").unwrap_err().0, None);
-        let mut other = bytes.clone();
-        other[6] = b'X';
-        assert_eq!(parse_basis(&other).unwrap_err().0, Some(0));
+        // Any flipped byte: an error or the same basis (a byte no check
+        // covers, such as a record's time), never another basis.
+        for i in 0..bytes.len() {
+            let mut d = bytes.clone();
+            d[i] ^= 0x11;
+            if let Ok(b) = parse_basis(&d) {
+                assert_eq!(b, sample(), "byte {i}");
+            }
+        }
+        // A NaN, with a valid CRC: named by its entry and index.
+        let mut nan = sample();
+        nan.vectors[4] = f64::NAN;
+        let e = parse_basis(&basis_bytes(&nan).unwrap()).unwrap_err();
+        assert!(e.1.contains("eigenvectors[4]"), "{e:?}");
+        // Shapes that do not fit together, and another format.
+        let archive = |format: &[u8], shape: [usize; 2]| {
+            let b = sample();
+            let (mut f, mut k, mut l, mut m, mut v) =
+                (Vec::new(), Vec::new(), Vec::new(), Vec::new(), Vec::new());
+            npy::write_u8(&mut f, format).unwrap();
+            npy::write_u8(&mut k, b.key.as_bytes()).unwrap();
+            npy::write_f64(&mut l, &[3], &b.eigenvalues).unwrap();
+            npy::write_f64(&mut m, &[2], &b.mass).unwrap();
+            npy::write_f64(&mut v, &shape, &b.vectors).unwrap();
+            let mut out = Vec::new();
+            let entries: [(&str, &[u8]); 5] = [
+                ("format.npy", &f),
+                ("key.npy", &k),
+                ("eigenvalues.npy", &l),
+                ("mass.npy", &m),
+                ("eigenvectors.npy", &v),
+            ];
+            npz::write_archive(&mut out, &entries).unwrap();
+            out
+        };
+        assert_eq!(parse_basis(&archive(FORMAT, [2, 3])).unwrap(), sample());
+        let e = parse_basis(&archive(FORMAT, [3, 2])).unwrap_err();
+        assert!(e.1.contains("shapes do not fit"), "{e:?}");
+        let e = parse_basis(&archive(b"fmaps-basis-1", [2, 3])).unwrap_err();
+        assert!(e.1.contains("this version reads"), "{e:?}");
+        // Files that are not archives at all.
+        assert!(parse_basis(b"FMAPS-BASIS-1\n").is_err());
+        assert!(parse_basis(b"OFF\n").is_err());
     }
 }

@@ -49,13 +49,18 @@ pub mod atomic;
 pub mod basis;
 mod corres;
 mod error;
+pub mod npy;
+pub mod npz;
 mod obj;
 mod off;
 mod ply;
 mod validate;
+pub mod vec3;
 
 use std::fs;
 use std::path::Path;
+
+use vec3::{cross, norm, sub};
 
 pub use corres::{
     Landmarks, check_indices, parse_index_list, parse_landmarks, read_landmarks, read_map,
@@ -64,7 +69,7 @@ pub use corres::{
 pub use error::{Error, Location, MeshProblem, Result};
 pub use obj::{parse_obj, write_obj};
 pub use off::{parse_off, write_off};
-pub use ply::{parse_ply, write_ply};
+pub use ply::{parse_ply, write_colored_ply, write_ply};
 pub use validate::MeshReport;
 
 /// A triangle mesh: vertex positions and triangles of 0-based vertex indices.
@@ -325,20 +330,12 @@ pub fn write_mesh(path: impl AsRef<Path>, mesh: &TriMesh) -> Result<()> {
     .map_err(|e| Error::io(path, e))
 }
 
-pub(crate) fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
-}
-
-pub(crate) fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [
-        a[1] * b[2] - a[2] * b[1],
-        a[2] * b[0] - a[0] * b[2],
-        a[0] * b[1] - a[1] * b[0],
-    ]
-}
-
-pub(crate) fn norm(a: [f64; 3]) -> f64 {
-    (a[0] * a[0] + a[1] * a[1] + a[2] * a[2]).sqrt()
+/// Writes a mesh with one colour per vertex to a PLY file
+/// ([`write_colored_ply`]), whole or not at all.
+pub fn save_colored_ply(path: impl AsRef<Path>, mesh: &TriMesh, colors: &[[u8; 3]]) -> Result<()> {
+    let path = path.as_ref();
+    atomic::write_atomically(path, |mut w| write_colored_ply(&mut w, mesh, colors))
+        .map_err(|e| Error::io(path, e))
 }
 
 /// Shared helpers of the text parsers.

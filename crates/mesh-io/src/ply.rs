@@ -1,5 +1,6 @@
 //! Stanford PLY: ASCII and binary (little and big endian).
 
+use std::fmt::Write as _;
 use std::io::{self, Write};
 
 use crate::TriMesh;
@@ -595,6 +596,44 @@ impl ValueReader for AsciiReader<'_> {
                 .map_err(|_| parse_err(FMT, loc, format!("'{tok}' is not a number")))
         }
     }
+}
+
+/// Writes a mesh with one RGB colour per vertex as ASCII PLY (opens in
+/// MeshLab, Blender, Open3D): `double` coordinates in the shortest
+/// round-trip decimal, `uchar` red, green and blue. An `InvalidInput`
+/// error when there is not one colour per vertex.
+pub fn write_colored_ply<W: Write>(
+    w: &mut W,
+    mesh: &TriMesh,
+    colors: &[[u8; 3]],
+) -> io::Result<()> {
+    if colors.len() != mesh.n_vertices() {
+        return Err(io::Error::new(
+            io::ErrorKind::InvalidInput,
+            format!(
+                "{} vertex colours for {} vertices",
+                colors.len(),
+                mesh.n_vertices()
+            ),
+        ));
+    }
+    let mut s = String::with_capacity(40 * (mesh.n_vertices() + mesh.n_faces()) + 256);
+    let _ = write!(
+        s,
+        "ply\nformat ascii 1.0\ncomment written by fmaps-mesh-io\nelement vertex {}\n\
+         property double x\nproperty double y\nproperty double z\n\
+         property uchar red\nproperty uchar green\nproperty uchar blue\n\
+         element face {}\nproperty list uchar int vertex_indices\nend_header\n",
+        mesh.n_vertices(),
+        mesh.n_faces()
+    );
+    for (p, c) in mesh.vertices().iter().zip(colors) {
+        let _ = writeln!(s, "{} {} {} {} {} {}", p[0], p[1], p[2], c[0], c[1], c[2]);
+    }
+    for f in mesh.faces() {
+        let _ = writeln!(s, "3 {} {} {}", f[0], f[1], f[2]);
+    }
+    w.write_all(s.as_bytes())
 }
 
 /// Writes a mesh as binary little-endian PLY with `double` coordinates and

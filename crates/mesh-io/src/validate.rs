@@ -1,6 +1,7 @@
 //! The mesh validation report.
 
-use crate::{TriMesh, cross, norm, sub};
+use crate::TriMesh;
+use crate::vec3::{cross, norm, sub};
 
 /// Combinatorics and defects of a triangle mesh, from [`TriMesh::validate`].
 ///

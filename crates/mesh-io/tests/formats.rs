@@ -610,3 +610,43 @@ fn landmark_files() {
     );
     assert!(l.check(5, 5, None).is_ok());
 }
+
+/// The coloured PLY reads back to the same geometry, bit for bit, extreme
+/// coordinates included; the colours are on the vertex lines; a colour
+/// count that is not the vertex count is an error.
+#[test]
+fn colored_ply_round_trips_the_geometry() {
+    let specials = [0.0, -0.0, 1e300, -1e-300, 5e-324, 0.1, -7.25, 1.0 / 3.0];
+    let vertices: Vec<[f64; 3]> = (0..24)
+        .map(|i| {
+            [
+                specials[i % 8],
+                specials[(i * 3 + 1) % 8] * i as f64,
+                -(i as f64) / 7.0,
+            ]
+        })
+        .collect();
+    let faces: Vec<[usize; 3]> = (0..22).map(|i| [i, i + 1, i + 2]).collect();
+    let mesh = TriMesh::new(vertices.clone(), faces.clone()).unwrap();
+    let colors: Vec<[u8; 3]> = (0..24u8).map(|i| [i, 255 - i, i * 10]).collect();
+    let mut bytes = Vec::new();
+    write_colored_ply(&mut bytes, &mesh, &colors).unwrap();
+    let m = parse_ply(&bytes).unwrap();
+    assert_eq!(m.faces(), &faces[..]);
+    for (a, b) in m.vertices().iter().zip(&vertices) {
+        for c in 0..3 {
+            assert_eq!(a[c].to_bits(), b[c].to_bits(), "{a:?} vs {b:?}");
+        }
+    }
+    let text = String::from_utf8(bytes).unwrap();
+    let body = text.split("end_header\n").nth(1).unwrap();
+    for (line, c) in body.lines().zip(&colors) {
+        let v: Vec<&str> = line.split(' ').collect();
+        assert_eq!(v[3..], [c[0], c[1], c[2]].map(|x| x.to_string()));
+    }
+    let e = write_colored_ply(&mut Vec::new(), &mesh, &colors[1..]).unwrap_err();
+    assert!(
+        e.to_string().contains("23 vertex colours for 24 vertices"),
+        "{e}"
+    );
+}

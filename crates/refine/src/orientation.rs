@@ -9,6 +9,8 @@
 //! carried to `(T(i), T(j), T(k))` on the target, turns the wrong way
 //! round relative to the target's outward normals.
 
+use fmaps_mesh_io::vec3::{cross, dot, sub};
+
 use crate::{Error, Result};
 
 /// Area-weighted orientation agreement of the point map `map` (one target
@@ -71,7 +73,7 @@ pub fn orientation_score(
     let (mut signed, mut total) = (0.0, 0.0);
     for f in source_faces {
         let n = cross_at(source_vertices, f[0], f[1], f[2]);
-        let area = dot(&n, &n).sqrt();
+        let area = dot(n, n).sqrt();
         total += area;
         let (i, j, k) = (map[f[0]], map[f[1]], map[f[2]]);
         if i == j || j == k || i == k {
@@ -82,7 +84,7 @@ pub fn orientation_score(
         for d in 0..3 {
             r[d] = normals[i][d] + normals[j][d] + normals[k][d];
         }
-        let s = dot(&m, &r);
+        let s = dot(m, r);
         if s > 0.0 {
             signed += area;
         } else if s < 0.0 {
@@ -128,7 +130,7 @@ pub fn area_distortion(
     )?;
     let area = |v: &[[f64; 3]], f: &[usize; 3]| {
         let n = cross_at(v, f[0], f[1], f[2]);
-        0.5 * dot(&n, &n).sqrt()
+        0.5 * dot(n, n).sqrt()
     };
     let total_s: f64 = source_faces.iter().map(|f| area(source_vertices, f)).sum();
     let total_t: f64 = target_faces.iter().map(|f| area(target_vertices, f)).sum();
@@ -189,17 +191,7 @@ fn check_map(
 }
 
 fn cross_at(v: &[[f64; 3]], i: usize, j: usize, k: usize) -> [f64; 3] {
-    let a = [v[j][0] - v[i][0], v[j][1] - v[i][1], v[j][2] - v[i][2]];
-    let b = [v[k][0] - v[i][0], v[k][1] - v[i][1], v[k][2] - v[i][2]];
-    [
-        a[1] * b[2] - a[2] * b[1],
-        a[2] * b[0] - a[0] * b[2],
-        a[0] * b[1] - a[1] * b[0],
-    ]
-}
-
-fn dot(a: &[f64; 3], b: &[f64; 3]) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+    cross(sub(v[j], v[i]), sub(v[k], v[i]))
 }
 
 #[cfg(test)]

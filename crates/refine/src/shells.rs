@@ -91,6 +91,7 @@ fn as_start(a: Alignment) -> Alignment {
 use std::time::Instant;
 
 use fmaps_eigensolve::SpectralBasis;
+use fmaps_simd::SplitMix;
 use nalgebra::{DMatrix, Matrix3, Vector3};
 use rayon::prelude::*;
 
@@ -220,26 +221,6 @@ fn schedule(k_max: usize, levels: usize) -> Vec<usize> {
         }
     }
     ks
-}
-
-/// A small deterministic generator (SplitMix64) with normal draws.
-struct Rng(u64);
-
-impl Rng {
-    fn next(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
-    }
-    fn uniform(&mut self) -> f64 {
-        ((self.next() >> 11) as f64 + 0.5) / (1u64 << 53) as f64
-    }
-    fn normal(&mut self) -> f64 {
-        let (u, v) = (self.uniform(), self.uniform());
-        (-2.0 * u.ln()).sqrt() * (std::f64::consts::TAU * v).cos()
-    }
 }
 
 /// Surrogate alignment over `ks` from `state`; returns its energy.
@@ -423,7 +404,7 @@ impl SmoothShells {
         let sigma: Vec<f64> = (0..K_MIN)
             .map(|i| if i == 0 { 0.0 } else { xs[0].xi.row(i).norm() })
             .collect();
-        let mut rng = Rng(self.seed);
+        let mut rng = SplitMix(self.seed);
         for i in 0..self.proposals * xs.len().min(self.orientations.max(1)) {
             let mut tau = zero();
             for r in 1..K_MIN {
@@ -788,7 +769,7 @@ mod tests {
 
     #[test]
     fn normal_draws_have_unit_variance() {
-        let mut r = Rng(7);
+        let mut r = SplitMix(7);
         let xs: Vec<f64> = (0..20000).map(|_| r.normal()).collect();
         let mean = xs.iter().sum::<f64>() / xs.len() as f64;
         let var = xs.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / xs.len() as f64;

@@ -40,8 +40,10 @@
 //! ```
 
 use crate::isosurface::{Grid, marching_tetrahedra, relax};
-use crate::vec3::{dot, normalized, rotate, smoothstep, sub};
+use crate::smoothstep;
 use fmaps_mesh_io::TriMesh;
+use fmaps_mesh_io::vec3::{dot, normalized, rotate, sub};
+use fmaps_simd::SplitMix;
 
 use crate::Result;
 
@@ -171,7 +173,7 @@ impl Build {
     /// 0.75-1.3, neck length in 0.6-1.5.
     pub fn random(seed: u64) -> Build {
         let mut rng = SplitMix(seed ^ 0xB0D1);
-        let mut f = |lo: f64, hi: f64| (lo.ln() + rng.uniform() * (hi.ln() - lo.ln())).exp();
+        let mut f = |lo: f64, hi: f64| (lo.ln() + rng.unit() * (hi.ln() - lo.ln())).exp();
         Build {
             torso_length: f(0.75, 1.3),
             torso_girth: f(0.7, 1.4),
@@ -278,7 +280,7 @@ impl BodyPose {
         let mut p = self.0;
         for r in p.iter_mut().skip(1) {
             for x in r.iter_mut() {
-                *x += amount * (2.0 * rng.uniform() - 1.0);
+                *x += amount * (2.0 * rng.unit() - 1.0);
             }
         }
         BodyPose(p)
@@ -494,15 +496,15 @@ impl Body {
         seed: u64,
     ) -> Result<GeneratedShape> {
         let mut rng = SplitMix(seed ^ 0x5EED);
-        let offset = [rng.uniform(), rng.uniform(), rng.uniform()];
+        let offset = [rng.unit(), rng.unit(), rng.unit()];
         let rest = self.rest_mesh(spacing, offset)?;
         let posed = self.deform(&rest, build, pose)?;
         // A turn about the vertical axis (y stays up, so that pictures of
         // the shapes need no per-shape view) by a pseudo-random angle.
-        let _ = [rng.uniform(), rng.uniform(), rng.uniform()];
+        let _ = [rng.unit(), rng.unit(), rng.unit()];
         let axis = [0.0, 1.0, 0.0];
-        let angle = 6.0 * rng.uniform();
-        let shift = [rng.uniform(), rng.uniform(), rng.uniform()];
+        let angle = 6.0 * rng.unit();
+        let shift = [rng.unit(), rng.unit(), rng.unit()];
         let (v, f) = posed.into_parts();
         let v = v
             .into_iter()
@@ -767,24 +769,6 @@ fn mat_mul(a: &[[f64; 3]; 3], b: &[[f64; 3]; 3]) -> [[f64; 3]; 3] {
 
 fn mat_vec(a: &[[f64; 3]; 3], x: [f64; 3]) -> [f64; 3] {
     [dot(a[0], x), dot(a[1], x), dot(a[2], x)]
-}
-
-/// SplitMix64: a small deterministic generator (no dependency).
-struct SplitMix(u64);
-
-impl SplitMix {
-    fn next(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
-    }
-
-    /// Uniform in [0, 1).
-    fn uniform(&mut self) -> f64 {
-        (self.next() >> 11) as f64 / (1u64 << 53) as f64
-    }
 }
 
 #[cfg(test)]

@@ -8,8 +8,9 @@
 //! identity and extrinsic coordinates do not give it away.
 
 use crate::primitives::icosphere;
-use crate::vec3::{dot, normalized, rotate, smoothstep};
+use crate::smoothstep;
 use fmaps_mesh_io::TriMesh;
+use fmaps_mesh_io::vec3::{dot, normalized, rotate};
 
 /// One limb: a smooth protrusion of the unit sphere along `direction`.
 #[derive(Debug, Clone, Copy)]

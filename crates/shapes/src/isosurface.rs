@@ -29,8 +29,8 @@
 
 use std::collections::HashMap;
 
-use crate::vec3::{cross, dot, sub};
 use fmaps_mesh_io::TriMesh;
+use fmaps_mesh_io::vec3::{cross, dot, sub};
 
 use crate::{Error, Result};
 

@@ -34,8 +34,9 @@
 //!
 //! # Features
 //!
-//! None: the crate depends on `fmaps-mesh-io`, `kiddo` (3D nearest-vertex
-//! queries for the bodies' ground truth) and `thiserror` only.
+//! None: the crate depends on `fmaps-mesh-io`, `fmaps-simd` (its seeded
+//! generator), `kiddo` (3D nearest-vertex queries for the bodies' ground
+//! truth) and `thiserror` only.
 #![deny(missing_docs)]
 #![forbid(unsafe_code)]
 
@@ -44,8 +45,14 @@ mod creature;
 mod error;
 pub mod isosurface;
 mod primitives;
-mod vec3;
 
 pub use creature::{MeshPair, Pose, creature, creature_pair};
 pub use error::{Error, Result};
 pub use primitives::{disjoint_union, grid, icosphere, subdivide, torus, translated};
+
+/// The cubic smoothstep `3x² − 2x³` of `x` clamped to [0, 1]: the blend of
+/// the generated bodies' joints and the creature's bends.
+pub(crate) fn smoothstep(x: f64) -> f64 {
+    let x = x.clamp(0.0, 1.0);
+    x * x * (3.0 - 2.0 * x)
+}

@@ -30,11 +30,17 @@
 //! fmaps_simd::set_simd_cap(None);
 //! ```
 //!
+//! The crate also holds the workspace's one deterministic random generator,
+//! [`SplitMix`], as the leaf every numeric crate already depends on.
+//!
 //! Nothing here can fail, so the crate has no error type.
 
 #![deny(missing_docs)]
 
 #[cfg(target_arch = "x86_64")]
+mod rng;
+pub use rng::SplitMix;
+
 use std::sync::OnceLock;
 use std::sync::atomic::{AtomicU8, Ordering};
 

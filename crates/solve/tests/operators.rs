@@ -1,6 +1,7 @@
 //! Descriptor multiplication and orientation operators on real meshes.
 
 use fmaps_mesh_io::TriMesh;
+use fmaps_mesh_io::vec3::{cross, dot, sub};
 use fmaps_shapes::grid;
 use fmaps_solve::*;
 use nalgebra::DMatrix;
@@ -19,20 +20,6 @@ fn functions(mesh: &TriMesh, p: usize) -> DMatrix<f64> {
         let t = q as f64 + 1.0;
         (0.3 * t * x + 0.2 * y).sin() + 0.1 * t * z * z + 0.05 * x * y
     })
-}
-
-fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
-}
-fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [
-        a[1] * b[2] - a[2] * b[1],
-        a[2] * b[0] - a[0] * b[2],
-        a[0] * b[1] - a[1] * b[0],
-    ]
-}
-fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 }
 
 /// The geometric definition, face by face: `Σ_F ∫_F φ_i ⟨n × ∇f, ∇φ_j⟩`

@@ -3,8 +3,8 @@
 //! ([`render`]), colours that show a map ([`position_colors`] carried by
 //! [`push_colors`], [`checkerboard`] textures, error heat maps through
 //! [`colormap`] with a [`colorbar`]), matrix heat maps and line plots
-//! ([`plot`]), PNG output ([`Image::save_png`]) and coloured PLY for
-//! MeshLab users ([`write_colored_ply`]).
+//! ([`plot`]) and PNG output ([`Image::save_png`]). The colours also go
+//! to MeshLab as a coloured PLY through `fmaps_mesh_io::save_colored_ply`.
 //!
 //! ```
 //! use fmaps_viz::{Image, View, position_colors, push_colors, render};
@@ -30,12 +30,10 @@
 mod color;
 mod image;
 pub mod plot;
-mod ply;
 mod render;
 
 pub use color::{checkerboard, colorbar, colormap, position_colors, push_colors, scalar_colors};
 pub use image::{BLACK, Image, WHITE};
-pub use ply::{colored_ply, write_colored_ply};
 pub use render::{Axis, View, render};
 
 /// Errors of this crate.

@@ -5,17 +5,7 @@
 
 use nalgebra::{DMatrix, Matrix3, Vector3};
 
-pub(super) fn sub(p: [f64; 3], q: [f64; 3]) -> [f64; 3] {
-    [p[0] - q[0], p[1] - q[1], p[2] - q[2]]
-}
-
-pub(super) fn cross(p: [f64; 3], q: [f64; 3]) -> [f64; 3] {
-    [
-        p[1] * q[2] - p[2] * q[1],
-        p[2] * q[0] - p[0] * q[2],
-        p[0] * q[1] - p[1] * q[0],
-    ]
-}
+pub(super) use fmaps_mesh_io::vec3::{cross, sub};
 
 /// The sign that orients a mesh's normals outwards: −1 when its signed
 /// volume is negative (a closed mesh whose faces turn inwards), else 1.

@@ -3,18 +3,18 @@
 //! perturbed as a noisy functional map moves them; one thread unless
 //! RAYON_NUM_THREADS says otherwise. Medians of 5 after a warm-up (one run above 40,000 rows).
 //!
-//! `cargo run --release -p fmaps-nearest --example strategies [FILE:N:K ...]`:
+//! `cargo xtask profile strategies -- [FILE:N:K ...]`:
 //! without arguments the grid's 5,000-vertex basis; each FILE holds an
 //! N x K basis as raw little-endian f64, column-major (e.g. numpy's
 //! `np.asfortranarray(phi).T.tofile(FILE)`).
 
 use std::time::Instant;
 
-use fmaps_eigensolve::conformance::grid_basis;
-use fmaps_nearest::{NnParams, NnStrategy, cpu_features, nearest_rows, view};
+use fmaps::eigensolve::conformance::grid_basis;
+use fmaps::nearest::{NnParams, NnStrategy, cpu_features, nearest_rows, view};
 use nalgebra::DMatrix;
 
-fn main() {
+pub fn run(argv: Vec<String>) -> Result<(), Box<dyn std::error::Error>> {
     println!(
         "kernels: {}; threads: {}",
         cpu_features(),
@@ -24,7 +24,8 @@ fn main() {
         "{:>7} {:>4} {:>9} {:>9} {:>9} {:>9}",
         "n", "d", "brute s", "tree s", "prefix s", "auto s"
     );
-    let mut bases: Vec<DMatrix<f64>> = std::env::args()
+    let mut bases: Vec<DMatrix<f64>> = argv
+        .into_iter()
         .skip(1)
         .map(|a| {
             let parts: Vec<&str> = a.split(':').collect();
@@ -84,4 +85,5 @@ fn main() {
             );
         }
     }
+    Ok(())
 }

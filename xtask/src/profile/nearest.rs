@@ -1,43 +1,26 @@
 //! Times one nearest-neighbour strategy on saved embeddings (as written
 //! by `cargo xtask bench-refine`, float64 `.npy`), for profiling:
-//! `cargo run --release -p fmaps-nearest --example nearest_profile --
+//! `cargo xtask profile nearest --
 //! target/bench/refine/data150.npy target/bench/refine/query150.npy tiles 20
 //! [hint | GUESSES.npy]` (strategies: brute, tree, prefix, balls, tiles,
 //! auto).
 use std::time::Instant;
 
-use fmaps_nearest::{NnParams, NnStrategy, cpu_features, nearest_rows, view};
+use fmaps::nearest::{NnParams, NnStrategy, cpu_features, nearest_rows, view};
 use nalgebra::DMatrix;
 
 /// A float64 `.npy` matrix (either order).
-fn load(path: &str) -> DMatrix<f64> {
-    let bytes = std::fs::read(path).expect("readable .npy");
-    let hlen = u16::from_le_bytes([bytes[8], bytes[9]]) as usize;
-    let header = std::str::from_utf8(&bytes[10..10 + hlen]).expect("ASCII header");
-    let fortran = header.contains("'fortran_order': True");
-    let shape: Vec<usize> = header
-        .split("'shape': (")
-        .nth(1)
-        .and_then(|s| s.split(')').next())
-        .expect("shape")
-        .split(',')
-        .filter_map(|t| t.trim().parse().ok())
-        .collect();
-    let vals: Vec<f64> = bytes[10 + hlen..]
-        .chunks_exact(8)
-        .map(|c| f64::from_le_bytes(c.try_into().expect("8 bytes")))
-        .collect();
-    let (r, c) = (shape[0], shape.get(1).copied().unwrap_or(1));
-    if fortran {
-        DMatrix::from_column_slice(r, c, &vals)
-    } else {
-        DMatrix::from_row_slice(r, c, &vals)
-    }
+fn load(path: &str) -> Result<DMatrix<f64>, Box<dyn std::error::Error>> {
+    let bytes = std::fs::read(path)?;
+    let a = fmaps::mesh_io::npy::parse_f64(&bytes)
+        .map_err(|(at, m)| format!("{path}, byte {at}: {m}"))?;
+    let (r, c) = (a.shape[0], a.shape.get(1).copied().unwrap_or(1));
+    Ok(DMatrix::from_column_slice(r, c, &a.data))
 }
 
-fn main() {
-    let args: Vec<String> = std::env::args().collect();
-    let (data, queries) = (load(&args[1]), load(&args[2]));
+pub fn run(argv: Vec<String>) -> Result<(), Box<dyn std::error::Error>> {
+    let args: Vec<String> = argv.into_iter().collect();
+    let (data, queries) = (load(&args[1])?, load(&args[2])?);
     let strategy = match args.get(3).map_or("auto", |s| s.as_str()) {
         "brute" => NnStrategy::Brute,
         "tree" => NnStrategy::Tree,
@@ -49,10 +32,10 @@ fn main() {
     let reps: usize = args.get(4).map_or(10, |s| s.parse().expect("a count"));
     // The balls' clusters (strategy `balls`, or `auto` with guesses and
     // no tiles), computed once, as ZoomOut does per shape.
-    let partition = fmaps_nearest::Partition::kmeans(
+    let partition = fmaps::nearest::Partition::kmeans(
         view(&data),
-        fmaps_nearest::BALL_SIZE,
-        fmaps_nearest::KMEANS_STEPS,
+        fmaps::nearest::BALL_SIZE,
+        fmaps::nearest::KMEANS_STEPS,
     );
     let search = |hint: Option<&[usize]>, strategy| {
         nearest_rows(
@@ -67,7 +50,7 @@ fn main() {
     // ZoomOut and ICP); a path to a float64 .npy of indices: those.
     let hint = match args.get(5).map(|s| s.as_str()) {
         Some("hint") => Some(search(None, NnStrategy::Brute)),
-        Some(path) => Some(load(path).iter().map(|&v| v as usize).collect()),
+        Some(path) => Some(load(path)?.iter().map(|&v| v as usize).collect()),
         None => None,
     };
     let t = Instant::now();
@@ -85,4 +68,5 @@ fn main() {
         cpu_features(),
         rayon::current_num_threads()
     );
+    Ok(())
 }

@@ -1,13 +1,13 @@
 //! Times the native backend on one mesh, several runs, one thread by
-//! default: `cargo run --release -p fmaps-eigensolve --example eigen_profile
+//! default: `cargo xtask profile eigen --
 //! -- MESH.off [K] [RUNS] [SUBSPACE] [BLOCK] [THREADS]` (SUBSPACE or BLOCK
 //! 0: the solver's default). Prints each run's iteration and total seconds and the median.
-use fmaps_eigensolve::{EigenProblem, EigenSolver, NativeParams, NativeSolver};
-use fmaps_laplacian::{LaplacianParams, cotan_laplacian};
+use fmaps::eigensolve::{EigenProblem, EigenSolver, NativeParams, NativeSolver};
+use fmaps::laplacian::{LaplacianParams, cotan_laplacian};
 use std::time::Instant;
 
-fn main() -> Result<(), Box<dyn std::error::Error>> {
-    let args: Vec<String> = std::env::args().skip(1).collect();
+pub fn run(argv: Vec<String>) -> Result<(), Box<dyn std::error::Error>> {
+    let args: Vec<String> = argv.into_iter().skip(1).collect();
     let path = args
         .first()
         .ok_or("usage: eigen_profile MESH [K] [RUNS] [SUBSPACE] [BLOCK] [THREADS]")?;
@@ -16,7 +16,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     };
     let (k, runs, sub, block, threads) =
         (arg(1, 200)?, arg(2, 5)?, arg(3, 0)?, arg(4, 0)?, arg(5, 1)?);
-    let mesh = fmaps_mesh_io::read_mesh(path)?;
+    let mesh = fmaps::mesh_io::read_mesh(path)?;
     let op = cotan_laplacian(&mesh, &LaplacianParams::default());
     let problem = EigenProblem::new(op.stiffness.view(), &op.mass)?;
     let defaults = NativeParams::default();

@@ -1,13 +1,13 @@
 //! Times ZoomOut 50:150:5 and ICP on one FAUST pair, repeatedly, for
-//! profiling: `cargo run --release -p fmaps --example refine_profile --
+//! profiling: `cargo xtask profile refine --
 //! A.off B.off [zoomout|zoomout1|icp|fit] [repeats]`.
 use std::time::Instant;
 
 use fmaps::pipeline::{MatchParams, match_prepared, prepare};
 use fmaps::refine::{Icp, Refiner, ZoomOut};
 
-fn main() -> Result<(), Box<dyn std::error::Error>> {
-    let args: Vec<String> = std::env::args().collect();
+pub fn run(argv: Vec<String>) -> Result<(), Box<dyn std::error::Error>> {
+    let args: Vec<String> = argv.into_iter().collect();
     let ma = fmaps::mesh_io::read_mesh(&args[1])?;
     let mb = fmaps::mesh_io::read_mesh(&args[2])?;
     let which = args.get(3).map_or("zoomout", |s| s.as_str());

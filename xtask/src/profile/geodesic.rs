@@ -2,15 +2,15 @@
 //! thread, and optionally checks the fields against saved references.
 //!
 //! ```text
-//! cargo run --release -p fmaps-geodesic --example exact_bench -- \
+//! cargo xtask profile geodesic -- \
 //!     [--sources N] [--window-ordered] [--save DIR | --check DIR] MESH.off...
 //! ```
 use std::time::Instant;
 
-use fmaps_geodesic::{ExactAlgorithm, ExactSolver};
+use fmaps::geodesic::{ExactAlgorithm, ExactSolver};
 
-fn main() -> Result<(), Box<dyn std::error::Error>> {
-    let mut args = std::env::args().skip(1);
+pub fn run(argv: Vec<String>) -> Result<(), Box<dyn std::error::Error>> {
+    let mut args = argv.into_iter().skip(1);
     let (mut n_src, mut save, mut check, mut meshes) = (10usize, None, None, Vec::new());
     let mut algorithm = ExactAlgorithm::Vtp;
     while let Some(a) = args.next() {
@@ -27,7 +27,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         "mesh", "n", "src", "ms/src", "windows", "propag", "stored", "max rel"
     );
     for path in &meshes {
-        let mesh = fmaps_mesh_io::read_mesh(path)?;
+        let mesh = fmaps::mesh_io::read_mesh(path)?;
         let solver = ExactSolver::new(&mesh)?.with_algorithm(algorithm);
         let n = mesh.vertices().len();
         let stem = std::path::Path::new(path)
