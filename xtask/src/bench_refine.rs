@@ -246,8 +246,8 @@ pub fn bench_refine(args: &Args) -> anyhow::Result<()> {
     // ICP compute them once per shape; not timed).
     let partition = fmaps::nearest::Partition::kmeans(
         view(&basis_1.eigenvectors),
-        fmaps::nearest::BALL_SIZE,
-        fmaps::nearest::KMEANS_STEPS,
+        fmaps::nearest::PartitionParams::default().ball_size,
+        fmaps::nearest::PartitionParams::default().kmeans_steps,
     );
     let mut nn_rows = Vec::new();
     for k in [10usize, 30, 50, 100, 150, 200] {

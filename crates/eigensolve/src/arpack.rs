@@ -24,6 +24,7 @@ static ARPACK_LOCK: Mutex<()> = Mutex::new(());
 
 /// Options of the ARPACK backend.
 #[derive(Debug, Clone, PartialEq)]
+#[non_exhaustive]
 pub struct ArpackParams {
     /// The shift σ; `None` as in [`crate::NativeParams::shift`].
     pub shift: Option<f64>,

@@ -161,6 +161,7 @@ impl GroundTruth {
 
 /// Options of [`evaluate`].
 #[derive(Debug, Clone, PartialEq)]
+#[non_exhaustive]
 pub struct EvalParams {
     /// Largest threshold of the cumulative curve (normalized error).
     pub max_threshold: f64,

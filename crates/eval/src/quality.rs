@@ -31,7 +31,7 @@ pub struct MapQuality {
     /// Area-weighted mean of the MIPS energy minus one,
     /// `(σ₁² + σ₂²) / (2 σ₁ σ₂) − 1` of each face's affine map to its image
     /// (0: conformal; faces collapsed or with a degenerate image excluded:
-    /// an image whose area is below [`COLLINEAR`] times its longest edge
+    /// an image whose area is below 1e-12 times its longest edge
     /// squared is three collinear vertices up to rounding, such as an edge's
     /// endpoints and midpoint on a subdivided mesh, whose MIPS energy would
     /// be rounding noise of order 1e11).
@@ -46,7 +46,7 @@ pub struct MapQuality {
 /// squared are degenerate for [`MapQuality::conformal_distortion`] (rounding
 /// leaves ~1e-16 for collinear vertices; a real triangle that thin would
 /// have a MIPS energy of ~1e12).
-pub const COLLINEAR: f64 = 1e-12;
+pub(crate) const COLLINEAR: f64 = 1e-12;
 
 /// Scores the map `t_ab` (for every vertex of `a`, a vertex of `b`) and,
 /// given `t_ba`, the pair of maps (see [`MapQuality`]).

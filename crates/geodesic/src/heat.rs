@@ -15,6 +15,7 @@ use fmaps_mesh_io::vec3::{dot, norm, sub};
 
 /// Options of [`HeatSolver`].
 #[derive(Debug, Clone, PartialEq)]
+#[non_exhaustive]
 pub struct HeatParams {
     /// The time step is `t_factor · h²`, h the mean edge length (the
     /// paper's default is 1).

@@ -64,6 +64,7 @@ pub enum MassKind {
 
 /// Options of [`cotan_laplacian`].
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
+#[non_exhaustive]
 pub struct LaplacianParams {
     /// The mass matrix to build.
     pub mass: MassKind,

@@ -1,7 +1,7 @@
 //! The ball search ([`NnStrategy::Balls`](crate::NnStrategy::Balls)).
 //!
 //! The data rows are split into small clusters (a [`Partition`]: k-means,
-//! ~[`BALL_SIZE`] rows each), each bounded twice: by a ball (its mean `c`
+//! ~[`PartitionParams::ball_size`] rows each), each bounded twice: by a ball (its mean `c`
 //! and the largest distance `r` from the mean to its rows), and by a
 //! *tangent box*: [`TANGENT`] orthonormal directions `U` spanning most of
 //! the rows' spread (greedy pivoted Gram–Schmidt), the box of the rows'
@@ -50,14 +50,15 @@ use nalgebra::DMatrix;
 use rayon::prelude::*;
 
 use crate::brute::{scale_for, score_err};
-pub use crate::partition::Partition;
+pub use crate::partition::{Partition, PartitionParams};
 use crate::rows::{Rows, dist2, dist2_below, dot8 as dot};
 
 /// Rows per ball (about; k-means balls vary in size): the default size of
-/// a [`Partition`].
-pub const BALL_SIZE: usize = 24;
-/// Lloyd steps of the default [`Partition::kmeans`].
-pub const KMEANS_STEPS: usize = 5;
+/// a [`Partition`] ([`PartitionParams::ball_size`]).
+pub(crate) const BALL_SIZE: usize = 24;
+/// Lloyd steps of the default [`Partition::kmeans`]
+/// ([`PartitionParams::kmeans_steps`]).
+pub(crate) const KMEANS_STEPS: usize = 5;
 /// Queries per block (one GEMM against the centres each).
 const QUERY_BLOCK: usize = 64;
 /// Fewest queries per block where the next query's guess lies in another

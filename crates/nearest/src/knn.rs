@@ -16,7 +16,7 @@ use rayon::prelude::*;
 use crate::{Result, check_finite, check_input};
 
 /// Extra candidates re-ranked by direct distance beyond the `k` asked.
-pub const KNN_MARGIN: usize = 8;
+pub(crate) const KNN_MARGIN: usize = 8;
 
 /// Queries per block.
 const BLOCK: usize = 256;

@@ -18,7 +18,7 @@
 //! that makes this cut sharp. The scans and distance kernels are compiled
 //! for AVX-512 and AVX2 as well and the widest one the CPU has is run.
 //!
-//! Without matrix tiles (with them, from [`TILED_BALLS_FROM_ROWS`] rows),
+//! Without matrix tiles (with them, from [`PartitionParams::tiled_from_rows`] rows),
 //! where a search is repeated on linear images of
 //! the same rows (ZoomOut's `Φ_A Cᵀ`) with guesses, clusters of the rows
 //! computed once ([`Partition`]) prune nearly everything
@@ -90,9 +90,10 @@ use nalgebra::DMatrix;
 use std::sync::OnceLock;
 
 use balls::BallData;
-pub use balls::{BALL_SIZE, KMEANS_STEPS, Partition};
+pub use balls::{Partition, PartitionParams};
 use brute::{BruteData, FUSED_MAX_DIM, brute_search, max_abs, power_of_two_scale, scale_for};
-pub use partition::{BALLS_MAX_ROWS, TILED_BALLS_FROM_ROWS, cluster_columns, coarse_ball_size};
+use partition::TILED_BALLS_FROM_ROWS;
+pub use partition::{cluster_columns, coarse_ball_size};
 use prefix::{PREFIX_FROM, PREFIX_MAX_ROWS, PrefixData, prefix_search};
 use rows::Rows;
 use std::sync::Arc;
@@ -107,7 +108,7 @@ const TREE_MIN_ROWS: usize = 50_000;
 
 pub use cpu::{CpuFeatures, SimdLevel, cpu_features, set_simd_cap, simd_level};
 pub use image::{CheckedRows, ImageSearch};
-pub use knn::{KNN_MARGIN, KNearest, k_nearest_rows};
+pub use knn::{KNearest, k_nearest_rows};
 pub use wedge::{Fan, wedge_sums};
 
 /// Errors of this crate.
@@ -227,7 +228,7 @@ pub struct NnParams {
     /// shape's spectral embedding, and reused for every linear image of it
     /// that is searched (ZoomOut's `Φ_A Cᵀ`). With a partition,
     /// [`NnStrategy::Auto`] runs the balls in more than 32 dimensions
-    /// where the CPU has no matrix tiles, or from [`TILED_BALLS_FROM_ROWS`]
+    /// where the CPU has no matrix tiles, or from [`PartitionParams::tiled_from_rows`]
     /// data rows where it has them (with or without guesses: without, each
     /// query is first seeded from its nearest centre's ball).
     pub partition: Option<Arc<Partition>>,
@@ -256,7 +257,7 @@ impl NnParams {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum NnStrategy {
     /// With a [`Partition`] in more than 32 dimensions the ball search
-    /// (where the CPU has matrix tiles, from [`TILED_BALLS_FROM_ROWS`] data
+    /// (where the CPU has matrix tiles, from [`PartitionParams::tiled_from_rows`] data
     /// rows); else the matrix tiles from 16 dimensions where the CPU has
     /// them; else the prefix search from 64 dimensions with guesses, the
     /// tree in 33 to 48 dimensions when both sets have 50,000 rows or
@@ -270,7 +271,7 @@ pub enum NnStrategy {
     /// a cluster of queries is compared (f32 GEMM) only with the data
     /// clusters that the triangle inequality cannot rule out.
     Tree,
-    /// Every pair is ranked on the leading [`PREFIX_DIM`] coordinates only
+    /// Every pair is ranked on the leading 40 coordinates only
     /// (half of them below 64 dimensions)
     /// (f32 GEMM of that width); a query's full f64 distance is computed
     /// only for the rows whose partial distance does not already exceed an
@@ -307,11 +308,11 @@ pub fn tiles_available() -> bool {
 /// Leading coordinates on which [`NnStrategy::Prefix`] ranks every pair
 /// from 64 dimensions on (below, half of the coordinates, at least
 /// [`PREFIX_MIN`]).
-pub const PREFIX_DIM: usize = 40;
+pub(crate) const PREFIX_DIM: usize = 40;
 
 /// Smallest prefix width; the prefix search needs at least twice as many
 /// dimensions.
-pub const PREFIX_MIN: usize = 8;
+pub(crate) const PREFIX_MIN: usize = 8;
 
 /// The prefix width used in dimension `d`.
 pub(crate) fn prefix_width(d: usize) -> usize {
@@ -607,7 +608,7 @@ impl Searcher {
 /// follows measurements on FAUST spectral embeddings (README, "Choosing a
 /// strategy"): the clusters where a partition is given, with or without
 /// guesses (more than 32 coordinates: below, the fused kernel; with
-/// matrix tiles from [`TILED_BALLS_FROM_ROWS`] data rows), else the tiles
+/// matrix tiles from [`PartitionParams::tiled_from_rows`] data rows), else the tiles
 /// wherever they exist, the prefix search with guesses in high
 /// dimensions, the tree
 /// only for very large sets in 33-48 dimensions (below 33 the fused

@@ -211,7 +211,7 @@ fn nearest_centres(centers: &[f64], c_norm: &[f64], d: usize, nb: usize) -> Vec<
 /// Rows up to which [`Partition::for_balls`] clusters (k-means with local
 /// Lloyd steps above 512 clusters: ~n·24·d per step; above, the default
 /// strategies).
-pub const BALLS_MAX_ROWS: usize = 250_000;
+pub(crate) const BALLS_MAX_ROWS: usize = 250_000;
 
 /// Rows from which [`Partition::for_balls`] and its siblings cluster on
 /// CPUs with matrix tiles too ([`tiles_available`](crate::tiles_available)):
@@ -219,7 +219,47 @@ pub const BALLS_MAX_ROWS: usize = 250_000;
 /// rows, the ball search's far less. On FAUST's spectral embeddings the
 /// tiles were faster at 5k rows for ZoomOut 50:150:5 and the balls from
 /// 10k on (docs/tuning.md; the same maps).
-pub const TILED_BALLS_FROM_ROWS: usize = 8192;
+pub(crate) const TILED_BALLS_FROM_ROWS: usize = 8192;
+
+/// The ball search's clustering policy, as [`Partition::for_balls`] and
+/// its siblings apply it: cluster sizes, Lloyd steps, and the row counts
+/// over which clusters pay. [`Default`] is the policy they use (each value
+/// measured, docs/tuning.md); [`Partition::kmeans`] takes the first two
+/// explicitly.
+///
+/// ```
+/// let p = fmaps_nearest::PartitionParams::default();
+/// assert_eq!((p.ball_size, p.kmeans_steps), (24, 5));
+/// assert!(p.tiled_from_rows < p.max_rows);
+/// ```
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[non_exhaustive]
+pub struct PartitionParams {
+    /// Rows per cluster, about (k-means clusters vary in size): 24.
+    pub ball_size: usize,
+    /// Lloyd steps after the principal-direction bisection: 5.
+    pub kmeans_steps: usize,
+    /// Rows up to which the default clusters are made (k-means with local
+    /// Lloyd steps above 512 clusters: ~n·24·d per step; above, the other
+    /// strategies): 250,000.
+    pub max_rows: usize,
+    /// Rows from which clusters are made on CPUs with matrix tiles too
+    /// ([`tiles_available`](crate::tiles_available)): the tiles rank every
+    /// pair, so their cost grows with the square of the rows, the ball
+    /// search's far less: 8192.
+    pub tiled_from_rows: usize,
+}
+
+impl Default for PartitionParams {
+    fn default() -> Self {
+        PartitionParams {
+            ball_size: crate::balls::BALL_SIZE,
+            kmeans_steps: crate::balls::KMEANS_STEPS,
+            max_rows: BALLS_MAX_ROWS,
+            tiled_from_rows: TILED_BALLS_FROM_ROWS,
+        }
+    }
+}
 
 /// Leading columns of `d` that [`Partition::for_balls`] clusters: half
 /// of them, at least 64 (all of them up to 64).
@@ -230,33 +270,34 @@ pub fn cluster_columns(d: usize) -> usize {
 /// Rows per ball for one search of about `n` queries among `n` rows
 /// without guesses or with weak ones (an initial conversion, the first
 /// full-size search after iterations on samples): about `√(n/5)`, at least
-/// [`BALL_SIZE`](crate::BALL_SIZE). That balances a query's comparisons
+/// [`PartitionParams::ball_size`]. That balances a query's comparisons
 /// with the n / size centres against the rows of the ~5 balls it opens
 /// (README: on FAUST's 80k pair, 126 rows per ball make the initial point
 /// map and the final search of a sampled ZoomOut about twice as fast as
 /// 24, the same maps). Searches with the previous iteration's map as
-/// guesses open fewer balls and keep [`BALL_SIZE`](crate::BALL_SIZE)
+/// guesses open fewer balls and keep [`PartitionParams::ball_size`]
 /// (larger balls were slower there).
 ///
 /// ```
 /// assert_eq!(fmaps_nearest::coarse_ball_size(80_000), 126);
-/// assert_eq!(fmaps_nearest::coarse_ball_size(1000), fmaps_nearest::BALL_SIZE);
+/// let defaults = fmaps_nearest::PartitionParams::default();
+/// assert_eq!(fmaps_nearest::coarse_ball_size(1000), defaults.ball_size);
 /// ```
 pub fn coarse_ball_size(n: usize) -> usize {
-    ((n as f64 / 5.0).sqrt().round() as usize).max(crate::BALL_SIZE)
+    ((n as f64 / 5.0).sqrt().round() as usize).max(crate::balls::BALL_SIZE)
 }
 
 impl Partition {
     /// The default clusters for searching the rows `rows` (n x d) or any
     /// linear image of them with the ball search, when that is the
-    /// fastest exact search: `min_rows..=` [`BALLS_MAX_ROWS`] rows (below
+    /// fastest exact search: `min_rows..=` [`PartitionParams::max_rows`] rows (below
     /// `min_rows`, which depends on the caller's searches, the other
     /// strategies are as fast; on CPUs with matrix tiles,
     /// [`tiles_available`](crate::tiles_available), at least
-    /// [`TILED_BALLS_FROM_ROWS`], below which the tiles are), d > 0, and
+    /// [`PartitionParams::tiled_from_rows`], below which the tiles are), d > 0, and
     /// `FMAPS_NO_BALLS` unset (`FMAPS_NO_BALLS=1`: `None`, to compare; the
-    /// answers are the same). [`Partition::kmeans`] with [`BALL_SIZE`](crate::BALL_SIZE)
-    /// and [`KMEANS_STEPS`](crate::KMEANS_STEPS) of the leading
+    /// answers are the same). [`Partition::kmeans`] with [`PartitionParams::ball_size`]
+    /// and [`PartitionParams::kmeans_steps`] of the leading
     /// [`cluster_columns`]`(d)` columns: on a spectral embedding the
     /// smoothest eigenfunctions already decide which rows are neighbours,
     /// and the Lloyd steps cost half as much (FAUST 5k, ZoomOut 50:150:5,
@@ -270,7 +311,7 @@ impl Partition {
     /// }
     /// ```
     pub fn for_balls(rows: MatRef<'_, f64>, min_rows: usize) -> Option<Arc<Partition>> {
-        Partition::for_balls_with_steps(rows, min_rows, crate::KMEANS_STEPS)
+        Partition::for_balls_with_steps(rows, min_rows, crate::balls::KMEANS_STEPS)
     }
 
     /// [`for_balls`](Self::for_balls) with `steps` Lloyd steps: fewer
@@ -295,7 +336,7 @@ impl Partition {
         }
         Some(Partition::kmeans(
             rows.subcols(0, cluster_columns(rows.ncols())),
-            crate::BALL_SIZE,
+            crate::balls::BALL_SIZE,
             steps,
         ))
     }
@@ -317,7 +358,7 @@ impl Partition {
         Some(Partition::kmeans(
             rows.subcols(0, cluster_columns(rows.ncols())),
             coarse_ball_size(rows.nrows()),
-            crate::KMEANS_STEPS,
+            crate::balls::KMEANS_STEPS,
         ))
     }
 
@@ -345,7 +386,7 @@ impl Partition {
     /// ([`NnStrategy::Brute`](crate::NnStrategy::Brute), e.g. Smooth
     /// Shells' searches among a few thousand samples): the same conditions
     /// on any CPU, without the tiles' row threshold
-    /// ([`TILED_BALLS_FROM_ROWS`]), which compares the balls with the tiles.
+    /// ([`PartitionParams::tiled_from_rows`]), which compares the balls with the tiles.
     ///
     /// ```
     /// let rows = faer::Mat::<f64>::zeros(3000, 4);
@@ -383,7 +424,7 @@ impl Partition {
     }
 
     /// The conditions of [`for_balls`](Self::for_balls), `tiles` saying
-    /// whether [`TILED_BALLS_FROM_ROWS`] applies.
+    /// whether [`PartitionParams::tiled_from_rows`] applies.
     fn balls_pay_with(n: usize, d: usize, min_rows: usize, tiles: bool) -> bool {
         let off = std::env::var_os("FMAPS_NO_BALLS").is_some_and(|v| !v.is_empty() && v != "0");
         let min_rows = if tiles {
@@ -416,7 +457,7 @@ impl Partition {
 
     /// A partition given by the cluster of each row (any labels: empty
     /// clusters are skipped; the search is exact with any partition, and
-    /// fast with compact clusters of ~[`BALL_SIZE`](crate::BALL_SIZE) rows, e.g. patches of
+    /// fast with compact clusters of ~[`PartitionParams::ball_size`] rows, e.g. patches of
     /// neighbouring vertices).
     pub fn from_labels(labels: Vec<u32>) -> Arc<Partition> {
         Arc::new(Partition { labels })

@@ -30,7 +30,11 @@ fn images_at_growing_sizes_give_the_naive_answer() {
     let b = grid_basis(48, 30, 100);
     let x = b.eigenvectors.columns(0, 60).into_owned();
     let n = x.nrows();
-    let partition = Partition::kmeans(view(&x), fmaps_nearest::BALL_SIZE, 3);
+    let partition = Partition::kmeans(
+        view(&x),
+        fmaps_nearest::PartitionParams::default().ball_size,
+        3,
+    );
     let search = ImageSearch::new(view(&x), partition).unwrap();
     assert_eq!(search.len(), n);
     // Queries: the rows themselves, bent (a map's error), a few far off.

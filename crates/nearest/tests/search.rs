@@ -4,7 +4,13 @@
 //! resolution, and the worst case of the bf16 bound of the tiles.
 
 use fmaps_eigensolve::conformance::grid_basis;
-use fmaps_nearest::{NnStrategy, PREFIX_DIM, PREFIX_MIN};
+use fmaps_nearest::NnStrategy;
+
+/// The prefix search's widths as `NnStrategy::Prefix` documents them: 40
+/// leading coordinates from 64 dimensions on, half of them below, at least
+/// 8.
+const PREFIX_DIM: usize = 40;
+const PREFIX_MIN: usize = 8;
 use nalgebra::DMatrix;
 
 mod common;
@@ -140,13 +146,19 @@ fn prefix_search_equals_brute_force_whatever_the_guesses() {
 
 /// The default clusters of the ball search ([`fmaps_nearest::Partition::for_balls`]):
 /// none below the caller's row count, for zero columns, where matrix tiles
-/// exist below `TILED_BALLS_FROM_ROWS` rows, or with `FMAPS_NO_BALLS` set
+/// exist below `PartitionParams::tiled_from_rows` rows, or with `FMAPS_NO_BALLS` set
 /// (not set in this test); otherwise a k-means partition of every row, the
 /// same as `Partition::kmeans` with the default sizes on the leading
 /// `cluster_columns(d)` columns (half of them, at least 64).
 #[test]
 fn default_ball_clusters_follow_the_policy() {
-    use fmaps_nearest::{BALL_SIZE, KMEANS_STEPS, Partition, tiles_available, view};
+    use fmaps_nearest::{Partition, PartitionParams, tiles_available, view};
+    let PartitionParams {
+        ball_size,
+        kmeans_steps,
+        tiled_from_rows,
+        ..
+    } = PartitionParams::default();
     if std::env::var_os("FMAPS_NO_BALLS").is_some() {
         eprintln!("note: default_ball_clusters_follow_the_policy: skipped, FMAPS_NO_BALLS is set");
         return;
@@ -172,26 +184,24 @@ fn default_ball_clusters_follow_the_policy() {
         assert_eq!(got.len(), n);
         assert_eq!(
             got,
-            Partition::kmeans(view(&rows).subcols(0, 75), BALL_SIZE, KMEANS_STEPS)
+            Partition::kmeans(view(&rows).subcols(0, 75), ball_size, kmeans_steps)
         );
         assert_ne!(
             got,
-            Partition::kmeans(view(&rows), BALL_SIZE, KMEANS_STEPS),
+            Partition::kmeans(view(&rows), ball_size, kmeans_steps),
             "the clusters of all columns differ here, so the test sees the column count"
         );
     }
-    // From TILED_BALLS_FROM_ROWS rows clusters on every CPU; one row fewer
+    // From `tiled_from_rows` rows clusters on every CPU; one row fewer
     // only without tiles (rows of any smooth map: the policy looks at the
     // counts only).
-    use fmaps_nearest::TILED_BALLS_FROM_ROWS;
     let big = |n: usize| {
         faer::Mat::<f64>::from_fn(n, 3, |i, j| ((i as f64) * 0.001 * (j + 1) as f64).sin())
     };
-    let at = big(TILED_BALLS_FROM_ROWS);
-    let got =
-        Partition::for_balls(at.as_ref(), 1).expect("clusters from TILED_BALLS_FROM_ROWS rows");
-    assert_eq!(got.len(), TILED_BALLS_FROM_ROWS);
-    let below = big(TILED_BALLS_FROM_ROWS - 1);
+    let at = big(tiled_from_rows);
+    let got = Partition::for_balls(at.as_ref(), 1).expect("clusters from tiled_from_rows rows");
+    assert_eq!(got.len(), tiled_from_rows);
+    let below = big(tiled_from_rows - 1);
     assert_eq!(
         Partition::for_balls(below.as_ref(), 1).is_some(),
         !tiles_available()
@@ -206,13 +216,14 @@ fn default_ball_clusters_follow_the_policy() {
 /// guess, exact, shifted and out-of-range guesses.
 #[test]
 fn ball_search_equals_brute_force_with_any_partition() {
-    use fmaps_nearest::{BALL_SIZE, KMEANS_STEPS, NnParams, Partition, view};
+    use fmaps_nearest::{NnParams, Partition, PartitionParams, view};
+    let defaults = PartitionParams::default();
     let b = grid_basis(48, 24, 80);
     let n = b.n();
     let own = Partition::kmeans(
         view(&b.eigenvectors.columns(0, 80).into_owned()),
-        BALL_SIZE,
-        KMEANS_STEPS,
+        defaults.ball_size,
+        defaults.kmeans_steps,
     );
     let partitions = [
         own,

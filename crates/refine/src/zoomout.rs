@@ -654,7 +654,7 @@ const BALLS_MIN_ROWS: usize = 1024;
 /// (`NnStrategy::Balls`: exact, and where there are no matrix tiles the
 /// fastest search of a linear image of these rows with guesses), when it
 /// pays ([`fmaps_nearest::Partition::for_balls`]: 1024-250,000 rows, with
-/// matrix tiles from `fmaps_nearest::TILED_BALLS_FROM_ROWS`, `FMAPS_NO_BALLS`
+/// matrix tiles from `fmaps_nearest::PartitionParams::tiled_from_rows`, `FMAPS_NO_BALLS`
 /// unset).
 pub(crate) fn balls_partition(r: &BasisRows) -> Option<std::sync::Arc<fmaps_nearest::Partition>> {
     fmaps_nearest::Partition::for_balls(r.view(r.k()), BALLS_MIN_ROWS)

@@ -116,7 +116,7 @@ pub fn fmap_from_point_map(
 
 /// `T_BA(y) = argmin_x ‖C_AB Φ_A(x)ᵀ − Φ_B(y)ᵀ‖`: the point map B → A of a
 /// functional map A → B (uses the first k_A and k_B eigenvectors, as `c_ab`
-/// is sized). Exact nearest neighbours; above [`BALLS_FROM_ROWS`] vertices
+/// is sized). Exact nearest neighbours; from 20,000 vertices
 /// of A (and without matrix tiles) they are searched in k-means clusters of
 /// A's rows, built for this one search.
 pub fn point_map_from_fmap(
@@ -162,7 +162,7 @@ fn convert_once(
 
 /// Rows of A from which [`point_map_from_fmap`] searches k-means clusters
 /// (below, the default strategies are as fast).
-pub const BALLS_FROM_ROWS: usize = 20_000;
+pub(crate) const BALLS_FROM_ROWS: usize = 20_000;
 
 /// Transfers functions on A (n_A x d) to B through `c_ab`:
 /// `Φ_B C_AB Φ_Aᵀ M_A f` (n_B x d).

@@ -224,7 +224,8 @@ fn pullback_update_equals_the_direct_pullback() {
     ));
 }
 
-/// On shapes above `BALLS_FROM_ROWS` vertices the one-off conversion
+/// On shapes of more than 20,000 vertices (the threshold
+/// `point_map_from_fmap` documents) the one-off conversion
 /// searches k-means clusters (without tiles); the map must be the exact
 /// nearest neighbours all the same: the brute-force search of the same
 /// embeddings, both directions of conversion.
@@ -237,7 +238,7 @@ fn large_conversions_equal_the_brute_force_search() {
         );
     }
     let (a, b) = (common::bumpy(150, 140), common::bumpy(141, 150));
-    assert!(a.n_vertices() > BALLS_FROM_ROWS && b.n_vertices() > BALLS_FROM_ROWS);
+    assert!(a.n_vertices() > 20_000 && b.n_vertices() > 20_000);
     let (ba, bb) = (basis(&a, 12), basis(&b, 12));
     // A map that is not diagonal: signs and a rotation of a 2-block.
     let mut c = DMatrix::<f64>::identity(12, 12);

@@ -34,8 +34,8 @@ pub fn run(argv: Vec<String>) -> Result<(), Box<dyn std::error::Error>> {
     // no tiles), computed once, as ZoomOut does per shape.
     let partition = fmaps::nearest::Partition::kmeans(
         view(&data),
-        fmaps::nearest::BALL_SIZE,
-        fmaps::nearest::KMEANS_STEPS,
+        fmaps::nearest::PartitionParams::default().ball_size,
+        fmaps::nearest::PartitionParams::default().kmeans_steps,
     );
     let search = |hint: Option<&[usize]>, strategy| {
         nearest_rows(

@@ -201,7 +201,7 @@ pub(crate) struct Samples<'a> {
     /// Their one-ring ([`Samples::pose`]; none for every vertex).
     ring: Option<Ring>,
     /// Clusters of the rows for the ball search among them
-    /// ([`super::level::correspondences`]): patches of ~[`fmaps_nearest::BALL_SIZE`]
+    /// ([`super::level::correspondences`]): patches of ~[`fmaps_nearest::PartitionParams::ball_size`]
     /// samples (searched with the previous level's correspondences as
     /// guesses), or of every vertex of a large shape (one search each).
     pub cells: Option<Vec<u32>>,
@@ -218,7 +218,8 @@ impl<'a> Samples<'a> {
             ring: Some(Ring::new(s, &idx)),
             cells: Some(surface_cells(
                 &idx.iter().map(|&i| s.verts[i]).collect::<Vec<_>>(),
-                idx.len().div_ceil(fmaps_nearest::BALL_SIZE),
+                idx.len()
+                    .div_ceil(fmaps_nearest::PartitionParams::default().ball_size),
             )),
             idx,
         }

@@ -71,7 +71,7 @@ fn the_search_on_every_vertex_agrees_with_brute_force() {
         if params.strategy != fmaps_nearest::NnStrategy::Balls {
             eprintln!(
                 "skipped (cells: {}): the ball search is not chosen on this CPU (matrix tiles, \
-                 k-means clusters below TILED_BALLS_FROM_ROWS rows) or with FMAPS_NO_BALLS; \
+                 k-means clusters below PartitionParams::tiled_from_rows rows) or with FMAPS_NO_BALLS; \
                  brute force alone was compared with itself",
                 cells.is_some()
             );
@@ -92,7 +92,10 @@ fn the_search_among_samples_with_guesses_agrees_with_brute_force() {
     let embed = |cols, shift| sphere_embedding(n, cols, shift, 0.04, 0.1, [1.0, 0.5, -0.3]);
     let e = embed(3, 0.0);
     let points: Vec<[f64; 3]> = (0..n).map(|i| [e[(i, 0)], e[(i, 1)], e[(i, 2)]]).collect();
-    let cells = super::super::posed::surface_cells(&points, n.div_ceil(fmaps_nearest::BALL_SIZE));
+    let cells = super::super::posed::surface_cells(
+        &points,
+        n.div_ceil(fmaps_nearest::PartitionParams::default().ball_size),
+    );
     for cols in [HINTED_BALLS_FROM_COLS - 1, HINTED_BALLS_FROM_COLS, 197] {
         let (data, queries) = (embed(cols, 0.0), embed(cols, 0.011));
         let want = brute(&data, &queries);
