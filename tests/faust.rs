@@ -27,10 +27,8 @@ fn faust_mesh_spectrum() {
 
     #[cfg(feature = "arpack")]
     {
-        let p = fmaps::SpectrumParams {
-            backend: fmaps::Backend::Arpack,
-            ..Default::default()
-        };
+        let mut p = fmaps::SpectrumParams::default();
+        p.backend = fmaps::Backend::Arpack;
         let a = fmaps::spectrum(&mesh, 60, &p).unwrap();
         for i in 1..60 {
             let (x, y) = (b.eigenvalues[i], a.basis.eigenvalues[i]);

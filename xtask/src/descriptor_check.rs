@@ -61,22 +61,16 @@ pub fn descriptor_check(args: &Args) -> anyhow::Result<()> {
         let compute =
             |evals: &DVector<f64>, evecs: &DMatrix<f64>| -> anyhow::Result<DMatrix<f64>> {
                 Ok(match kind {
-                    "hks" => hks(
-                        evals,
-                        evecs,
-                        &HksParams {
-                            n_times: args.n_descr,
-                            scaled: true,
-                        },
-                    )?,
-                    _ => wks(
-                        evals,
-                        evecs,
-                        &WksParams {
-                            n_energies: args.n_descr,
-                            scaled: true,
-                        },
-                    )?,
+                    "hks" => hks(evals, evecs, &{
+                        let mut p = HksParams::default();
+                        p.n_times = args.n_descr;
+                        p
+                    })?,
+                    _ => wks(evals, evecs, &{
+                        let mut p = WksParams::default();
+                        p.n_energies = args.n_descr;
+                        p
+                    })?,
                 })
             };
         let same = compute(&evals, &evecs)?;

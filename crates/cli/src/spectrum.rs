@@ -45,15 +45,14 @@ pub(crate) fn spectrum(
         (None, None) => return Err(input(anyhow::anyhow!("give a mesh file or --builtin"))),
     };
     let load_s = t.elapsed().as_secs_f64();
-    let params = SpectrumParams {
-        mass: match mass {
-            Mass::Lumped => MassKind::Lumped,
-            Mass::Voronoi => MassKind::Voronoi,
-        },
-        backend,
-        threads: rayon::current_num_threads(),
-        block_size,
+    let mut params = SpectrumParams::default();
+    params.mass = match mass {
+        Mass::Lumped => MassKind::Lumped,
+        Mass::Voronoi => MassKind::Voronoi,
     };
+    params.backend = backend;
+    params.threads = rayon::current_num_threads();
+    params.block_size = block_size;
     let spinner = Spinner::new(format!("{k} eigenpairs of {} vertices", mesh.n_vertices()));
     let s = fmaps::spectrum(&mesh, k, &params);
     drop(spinner);

@@ -24,7 +24,10 @@
 //! // A toy basis: 3 vertices, 2 eigenpairs.
 //! let evals = DVector::from_vec(vec![0.0, 2.0]);
 //! let evecs = DMatrix::from_row_slice(3, 2, &[0.5, 0.7, 0.5, 0.0, 0.5, -0.7]);
-//! let d = hks(&evals, &evecs, &HksParams { n_times: 4, scaled: false })?;
+//! let mut params = HksParams::default(); // 100 scaled times, as pyFM
+//! params.n_times = 4;
+//! params.scaled = false;
+//! let d = hks(&evals, &evecs, &params)?;
 //! assert_eq!(d.shape(), (3, 4));
 //! // Vertex 1 has no energy in the second eigenvector: HKS = 0.25 at all t.
 //! assert!(d.row(1).iter().all(|x| (x - 0.25).abs() < 1e-15));
@@ -68,6 +71,7 @@ pub type Result<T, E = Error> = std::result::Result<T, E>;
 
 /// Options of the HKS. `Default`: 100 times, scaled (pyFM's `mesh_HKS`).
 #[derive(Debug, Clone, PartialEq)]
+#[non_exhaustive]
 pub struct HksParams {
     /// Number of time samples.
     pub n_times: usize,
@@ -86,6 +90,7 @@ impl Default for HksParams {
 
 /// Options of the WKS. `Default`: 100 energies, scaled (pyFM's `mesh_WKS`).
 #[derive(Debug, Clone, PartialEq)]
+#[non_exhaustive]
 pub struct WksParams {
     /// Number of energy samples.
     pub n_energies: usize,
@@ -345,6 +350,7 @@ impl std::str::FromStr for DescriptorKind {
 /// What [`descriptor_matrix`] computes. `Default`: 100 WKS energies, every
 /// column kept.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[non_exhaustive]
 pub struct DescriptorParams {
     /// The family.
     pub kind: DescriptorKind,

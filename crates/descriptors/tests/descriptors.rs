@@ -45,16 +45,7 @@ fn all(b: &SpectralBasis) -> Vec<DMatrix<f64>> {
     vec![
         hks(&b.eigenvalues, &b.eigenvectors, &HksParams::default()).unwrap(),
         wks(&b.eigenvalues, &b.eigenvectors, &WksParams::default()).unwrap(),
-        landmark_wks(
-            &b.eigenvalues,
-            &b.eigenvectors,
-            &[3, 50],
-            &WksParams {
-                n_energies: 10,
-                scaled: true,
-            },
-        )
-        .unwrap(),
+        landmark_wks(&b.eigenvalues, &b.eigenvectors, &[3, 50], &wks_params(10)).unwrap(),
     ]
 }
 
@@ -79,10 +70,7 @@ fn permuting_vertices_permutes_descriptors() {
         &pb.eigenvalues,
         &pb.eigenvectors,
         &[inv[3], inv[50]],
-        &WksParams {
-            n_energies: 10,
-            scaled: true,
-        },
+        &wks_params(10),
     )
     .unwrap();
     for (x, y) in a.iter().zip(&c) {
@@ -118,10 +106,9 @@ fn rigid_motions_do_not_change_descriptors() {
 #[test]
 fn landmark_hks_is_symmetric() {
     let b = basis(&bumpy());
-    let p = HksParams {
-        n_times: 5,
-        scaled: false,
-    };
+    let mut p = HksParams::default();
+    p.n_times = 5;
+    p.scaled = false;
     let d = landmark_hks(&b.eigenvalues, &b.eigenvectors, &[7, 120], &p).unwrap();
     for t in 0..5 {
         let (x_at_l, l_at_x) = (d[(120, t)], d[(7, 5 + t)]);
@@ -174,14 +161,7 @@ fn errors() {
         Err(Error::TooFewEigenvalues(0))
     ));
     assert!(matches!(
-        wks(
-            &evals,
-            &evecs,
-            &WksParams {
-                n_energies: 0,
-                scaled: true
-            }
-        ),
+        wks(&evals, &evecs, &wks_params(0)),
         Err(Error::InvalidParameter(_))
     ));
 }
@@ -194,16 +174,12 @@ fn descriptor_matrix_stacks_subsamples_and_normalizes() {
     let b = basis(&bumpy());
     let (ev, phi, m) = (&b.eigenvalues, &b.eigenvectors, &b.mass);
     let landmarks = [3, 40];
-    let p = DescriptorParams {
-        kind: DescriptorKind::Wks,
-        n: 12,
-        subsample: 2,
-    };
+    let mut p = DescriptorParams::default();
+    p.kind = DescriptorKind::Wks;
+    p.n = 12;
+    p.subsample = 2;
     let got = descriptor_matrix(ev, phi, m, &landmarks, &p).unwrap();
-    let w = WksParams {
-        n_energies: 12,
-        ..Default::default()
-    };
+    let w = wks_params(12);
     let (a, l) = (
         wks(ev, phi, &w).unwrap(),
         landmark_wks(ev, phi, &landmarks, &w).unwrap(),
@@ -226,14 +202,21 @@ fn descriptor_matrix_stacks_subsamples_and_normalizes() {
         assert!((got.column(j) - &want).amax() < 1e-12, "column {j}");
         assert!((norm(&got.column(j).into_owned()) - 1.0).abs() < 1e-12);
     }
-    let h = DescriptorParams {
-        kind: DescriptorKind::Hks,
-        ..p
-    };
+    let mut h = p;
+    h.kind = DescriptorKind::Hks;
     assert_eq!(descriptor_matrix(ev, phi, m, &[], &h).unwrap().ncols(), 6);
-    let bad = DescriptorParams { subsample: 0, ..p };
+    let mut bad = p;
+    bad.subsample = 0;
     assert!(matches!(
         descriptor_matrix(ev, phi, m, &[], &bad),
         Err(Error::InvalidParameter(_))
     ));
+}
+
+/// Scaled WKS with `n` energies (the parameters are `#[non_exhaustive]`:
+/// built from the default).
+fn wks_params(n: usize) -> WksParams {
+    let mut p = WksParams::default();
+    p.n_energies = n;
+    p
 }

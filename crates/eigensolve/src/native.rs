@@ -34,6 +34,7 @@ use fmaps_simd::SplitMix;
 /// Options of the native backend. `Default` converges every eigenpair to
 /// near machine precision (eigenvalues agree with ARPACK's to ~1e-12).
 #[derive(Debug, Clone, PartialEq)]
+#[non_exhaustive]
 pub struct NativeParams {
     /// The shift σ (negative, so that `L − σM` is positive definite).
     /// `None` picks `−0.01 · 4π / area` with `area = Σ M`, i.e. −0.01 at the

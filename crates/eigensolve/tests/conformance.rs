@@ -16,16 +16,14 @@ fn backends() -> Vec<Box<dyn EigenSolver>> {
     let mut v: Vec<Box<dyn EigenSolver>> = vec![
         Box::new(NativeSolver::default()),
         // A smaller block and a tight basis: many restarts.
-        Box::new(NativeSolver::new(NativeParams {
-            block_size: 5,
-            subspace: Some(1),
-            ..Default::default()
-        })),
-        Box::new(NativeSolver::new(NativeParams {
-            factorization: fmaps_eigensolve::Factorization::Simplicial,
-            threads: 2,
-            ..Default::default()
-        })),
+        Box::new(NativeSolver::new(native(|p| {
+            p.block_size = 5;
+            p.subspace = Some(1);
+        }))),
+        Box::new(NativeSolver::new(native(|p| {
+            p.factorization = fmaps_eigensolve::Factorization::Simplicial;
+            p.threads = 2;
+        }))),
     ];
     #[cfg(feature = "arpack")]
     v.push(Box::new(ArpackSolver::default()));
@@ -264,10 +262,9 @@ fn bad_input_is_an_error() {
         Err(Error::SizeMismatch { .. })
     ));
     // A positive shift inside the spectrum makes L − σM indefinite.
-    let positive = NativeSolver::new(NativeParams {
-        shift: Some(5.0),
-        ..Default::default()
-    });
+    let positive = NativeSolver::new(native(|p| {
+        p.shift = Some(5.0);
+    }));
     assert!(matches!(
         positive.solve(&problem, 4),
         Err(Error::NotPositiveDefinite { .. })
@@ -278,22 +275,18 @@ fn bad_input_is_an_error() {
         Error::NotSquare { rows: 3, cols: 2 }
     );
     for bad in [
-        NativeParams {
-            tol: 0.0,
-            ..Default::default()
-        },
-        NativeParams {
-            tol: 1.5,
-            ..Default::default()
-        },
-        NativeParams {
-            block_size: 0,
-            ..Default::default()
-        },
-        NativeParams {
-            shift: Some(f64::NAN),
-            ..Default::default()
-        },
+        native(|p| {
+            p.tol = 0.0;
+        }),
+        native(|p| {
+            p.tol = 1.5;
+        }),
+        native(|p| {
+            p.block_size = 0;
+        }),
+        native(|p| {
+            p.shift = Some(f64::NAN);
+        }),
     ] {
         assert!(
             matches!(
@@ -322,12 +315,11 @@ fn bad_input_is_an_error() {
 fn no_convergence_is_reported_not_hidden() {
     let o = op(&icosphere(1.0, 3));
     let problem = EigenProblem::new(o.stiffness.view(), &o.mass).unwrap();
-    let s = NativeSolver::new(NativeParams {
-        max_restarts: 0,
-        tol: 1e-15,
-        subspace: Some(30),
-        ..Default::default()
-    });
+    let s = NativeSolver::new(native(|p| {
+        p.max_restarts = 0;
+        p.tol = 1e-15;
+        p.subspace = Some(30);
+    }));
     match s.solve(&problem, 20) {
         Err(Error::NoConvergence {
             wanted: 20,
@@ -352,10 +344,9 @@ fn locking_keeps_every_copy_and_the_accuracy() {
     let k = 100;
     let default = solve(&NativeSolver::default(), &o, k);
     let tight = solve(
-        &NativeSolver::new(NativeParams {
-            subspace: Some(1),
-            ..Default::default()
-        }),
+        &NativeSolver::new(native(|p| {
+            p.subspace = Some(1);
+        })),
         &o,
         k,
     );
@@ -516,4 +507,12 @@ fn from_eigenpairs_rejects_malformed_bases() {
     let b = SpectralBasis::from_eigenpairs(&p, good.eigenvalues.clone(), flipped, stats()).unwrap();
     assert_eq!(b.eigenvectors, good.eigenvectors);
     assert_eq!(b.report.backend, "custom");
+}
+
+/// The native solver's defaults changed by `set` (the parameters are
+/// `#[non_exhaustive]`: built from the default).
+fn native(set: impl FnOnce(&mut NativeParams)) -> NativeParams {
+    let mut p = NativeParams::default();
+    set(&mut p);
+    p
 }

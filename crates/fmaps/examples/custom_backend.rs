@@ -164,9 +164,10 @@ pub fn main() -> std::result::Result<(), Box<dyn std::error::Error>> {
         k_descr: 60,
         k: 30,
         refine: Refinement::zoomout(30, 80, 5),
-        spectrum: SpectrumParams {
-            backend: Backend::Custom(Arc::new(backend)),
-            ..SpectrumParams::default()
+        spectrum: {
+            let mut s = SpectrumParams::default();
+            s.backend = Backend::Custom(Arc::new(backend));
+            s
         },
         ..MatchParams::default()
     };

@@ -128,12 +128,10 @@ impl Backend {
     ) -> Result<SharedSolver, eigensolve::Error> {
         match self {
             Backend::Native => {
-                let d = NativeParams::default();
-                Ok(Arc::new(NativeSolver::new(NativeParams {
-                    threads,
-                    block_size: block_size.unwrap_or(d.block_size),
-                    ..d
-                })))
+                let mut p = NativeParams::default();
+                p.threads = threads;
+                p.block_size = block_size.unwrap_or(p.block_size);
+                Ok(Arc::new(NativeSolver::new(p)))
             }
             Backend::Dense => Ok(Arc::new(eigensolve::DenseSolver::default())),
             #[cfg(feature = "arpack")]
@@ -150,6 +148,7 @@ impl Backend {
 
 /// Options of [`spectrum`].
 #[derive(Debug, Clone, Default)]
+#[non_exhaustive]
 pub struct SpectrumParams {
     /// Mass matrix kind.
     pub mass: MassKind,

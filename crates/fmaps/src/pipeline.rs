@@ -639,11 +639,10 @@ pub fn shape_descriptors(
     params: &MatchParams,
 ) -> Result<DMatrix<f64>, MatchError> {
     let basis = shape.basis.truncate(params.k_descr);
-    let p = descriptors::DescriptorParams {
-        kind: params.descriptor,
-        n: params.n_descr,
-        subsample: params.subsample,
-    };
+    let mut p = descriptors::DescriptorParams::default();
+    p.kind = params.descriptor;
+    p.n = params.n_descr;
+    p.subsample = params.subsample;
     Ok(descriptors::descriptor_matrix(
         &basis.eigenvalues,
         &basis.eigenvectors,
@@ -788,9 +787,9 @@ fn shape_data<'a>(shape: &'a PreparedShape, truncated: &'a SpectralBasis) -> Sha
 
 /// The energy parameters of `params`.
 pub fn energy_params(params: &MatchParams) -> EnergyParams {
-    EnergyParams {
-        weights: params.weights(),
-        resolvent_gamma: params.resolvent_gamma,
-        orient_reversing: params.orient_reversing,
-    }
+    let mut p = EnergyParams::default();
+    p.weights = params.weights();
+    p.resolvent_gamma = params.resolvent_gamma;
+    p.orient_reversing = params.orient_reversing;
+    p
 }

@@ -227,10 +227,8 @@ fn spectrum<'py>(
     Bound<'py, PyArray1<f64>>,
 )> {
     let m = Arc::clone(&mesh.inner);
-    let params = fmaps::SpectrumParams {
-        threads: threads.unwrap_or(0),
-        ..Default::default()
-    };
+    let mut params = fmaps::SpectrumParams::default();
+    params.threads = threads.unwrap_or(0);
     let out = run(py, threads, move || fmaps::spectrum(&m, k, &params))?.map_err(err)?;
     let basis = out.basis;
     Ok((

@@ -28,6 +28,7 @@ pub struct ShapeData<'a> {
 
 /// The terms of [`build_energy`] and their relative weights.
 #[derive(Debug, Clone, Copy, PartialEq)]
+#[non_exhaustive]
 pub struct EnergyParams {
     /// Relative weights (the operators of a term are built only when its
     /// weight is positive).

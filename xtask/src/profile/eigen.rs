@@ -19,17 +19,13 @@ pub fn run(argv: Vec<String>) -> Result<(), Box<dyn std::error::Error>> {
     let mesh = fmaps::mesh_io::read_mesh(path)?;
     let op = cotan_laplacian(&mesh, &LaplacianParams::default());
     let problem = EigenProblem::new(op.stiffness.view(), &op.mass)?;
-    let defaults = NativeParams::default();
-    let solver = NativeSolver::new(NativeParams {
-        subspace: (sub > 0).then_some(sub),
-        block_size: if block > 0 {
-            block
-        } else {
-            defaults.block_size
-        },
-        threads,
-        ..defaults
-    });
+    let mut params = NativeParams::default();
+    params.subspace = (sub > 0).then_some(sub);
+    if block > 0 {
+        params.block_size = block;
+    }
+    params.threads = threads;
+    let solver = NativeSolver::new(params);
     let mut totals = Vec::new();
     for run in 0..=runs {
         let t0 = Instant::now();
