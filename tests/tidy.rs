@@ -289,7 +289,7 @@ fn architecture_md_names_every_crate() {
 
 #[test]
 fn code_comments_carry_no_benchmark_timings() {
-    // Figures go stale in comments; they belong in README or docs/.
+    // Figures go stale in comments; they belong in docs/benchmarks.md or docs/tuning.md.
     let mut bad = Vec::new();
     for f in rust_files() {
         if !(f.starts_with("crates/") && f.contains("/src/")) {
@@ -320,7 +320,7 @@ fn code_comments_carry_no_benchmark_timings() {
     }
     assert!(
         bad.is_empty(),
-        "timings in code comments (move them to README or docs/): {bad:?}"
+        "timings in code comments (move them to docs/benchmarks.md or docs/tuning.md): {bad:?}"
     );
 }
 

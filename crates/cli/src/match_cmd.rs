@@ -44,21 +44,21 @@ pub(crate) struct MatchArgs {
     #[arg(long, default_value_t = defaults().w_orient)]
     w_orient: f64,
     /// Refinement of the initial map. Default: smooth-shells (the most
-    /// accurate here, near-isometric and non-isometric; README's table),
+    /// accurate here, near-isometric and non-isometric; docs/benchmarks.md),
     /// or zoomout when only --zoomout is given; `none` keeps the initial
     /// map.
-    #[arg(long, value_enum)]
-    refine: Option<RefineKind>,
+    #[arg(long, value_parser = refiner_kind_parser())]
+    refine: Option<fmaps::pipeline::RefinerKind>,
     #[command(flatten)]
     pub(crate) refiner: RefinerFlags,
     /// Multi-start: also run from initial maps of these sizes and keep
     /// one final map by --select; `none` for a single start. Default:
     /// `8,20` with --refine zoomout, bijective-zoomout or discrete
-    /// (measured: fewer swapped parts, see README), none otherwise.
+    /// (measured: fewer swapped parts, docs/benchmarks.md), none otherwise.
     #[arg(long, value_name = "K1,K2,..|none")]
     starts: Option<String>,
     /// With several starts: keep the final map of lowest area distortion
-    /// (default; measured in README), of lowest conformal distortion, or
+    /// (default; measured, docs/benchmarks.md), of lowest conformal distortion, or
     /// of best orientation.
     #[arg(long, value_enum, default_value_t = SelectKind::Area)]
     select: SelectKind,
@@ -83,7 +83,7 @@ pub(crate) struct MatchArgs {
     /// animals, different builds): Smooth Shells screens all eight rigid
     /// orientations by a short alignment and chooses the final map by area
     /// distortion and orientation together (about the default's time: its
-    /// initialisation runs on fewer samples; README's accuracy table,
+    /// initialisation runs on fewer samples; the accuracy table of docs/benchmarks.md,
     /// column `non-isometric`). Other refinements ignore
     /// it.
     #[arg(long)]
@@ -102,47 +102,20 @@ pub(crate) struct MatchArgs {
     pub(crate) json: bool,
 }
 
-#[derive(Clone, Copy, PartialEq, Eq, ValueEnum)]
-pub(crate) enum RefineKind {
-    /// No refinement.
-    None,
-    /// Spectral ICP (orthogonal Procrustes) at the map's size.
-    Icp,
-    /// ZoomOut spectral upsampling.
-    Zoomout,
-    /// Bijective ZoomOut (Ren et al., "Discrete Optimization for Shape
-    /// Matching", SGP 2021): both point maps updated together, each
-    /// pulled towards the other's inverse; schedule from --zoomout.
-    BijectiveZoomout,
-    /// The discrete solver of the same paper on orthogonality,
-    /// bijectivity, properness and Laplacian commutativity (equal
-    /// weights); schedule from --zoomout.
-    Discrete,
-    /// A repair of the BCICP class (Ren et al., SIGGRAPH Asia 2018) at
-    /// the map's size: bijective ICP alternated with coverage, continuity
-    /// and smoothness repairs of both point maps on the meshes.
-    Bcicp,
-    /// Smooth Shells (Eisenberger et al., CVPR 2020): shape A's smooth
-    /// shells deformed onto B's, coarse to fine, with its own
-    /// initialisation (rigid alignment and deformation proposals; the
-    /// descriptor map is one proposal).
-    SmoothShells,
-}
-
-impl RefineKind {
-    /// The facade's name for this kind.
-    pub(crate) fn kind(self) -> fmaps::pipeline::RefinerKind {
-        use fmaps::pipeline::RefinerKind as K;
-        match self {
-            RefineKind::None => K::None,
-            RefineKind::Icp => K::Icp,
-            RefineKind::Zoomout => K::Zoomout,
-            RefineKind::BijectiveZoomout => K::BijectiveZoomout,
-            RefineKind::Discrete => K::Discrete,
-            RefineKind::Bcicp => K::Bcicp,
-            RefineKind::SmoothShells => K::SmoothShells,
-        }
-    }
+/// `--refine NAME`: the facade's [`RefinerKind`](fmaps::pipeline::RefinerKind),
+/// with its names and one-line summaries as the possible values (one enum
+/// for the command line, the library and Python).
+pub(crate) fn refiner_kind_parser()
+-> impl clap::builder::TypedValueParser<Value = fmaps::pipeline::RefinerKind> {
+    use clap::builder::{PossibleValue, PossibleValuesParser, TypedValueParser};
+    use fmaps::pipeline::RefinerKind;
+    PossibleValuesParser::new(
+        RefinerKind::ALL.map(|k| PossibleValue::new(k.name()).help(k.summary())),
+    )
+    .map(|name| {
+        name.parse::<RefinerKind>()
+            .expect("the possible values are the kinds' names")
+    })
 }
 
 /// `--select`.
@@ -271,7 +244,7 @@ fn refinement(
 ) -> Result<(fmaps::pipeline::RefinerKind, fmaps::pipeline::Refinement), Failure> {
     use fmaps::pipeline::RefinerKind;
     let kind = match (args.refine, &args.refiner.zoomout) {
-        (Some(k), _) => k.kind(),
+        (Some(k), _) => k,
         (None, Some(_)) => RefinerKind::Zoomout,
         (None, None) => RefinerKind::default_for(n_a.min(n_b)),
     };

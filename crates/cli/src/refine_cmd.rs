@@ -4,7 +4,8 @@ use super::*;
 
 use fmaps::pipeline::{MatchParams, Refinement};
 
-use crate::match_cmd::{RefineKind, match_failure};
+use crate::match_cmd::{match_failure, refiner_kind_parser};
+use fmaps::pipeline::RefinerKind;
 
 /// Options of `fmaps refine`.
 #[derive(clap::Args)]
@@ -18,8 +19,8 @@ pub(crate) struct RefineArgs {
     #[arg(long)]
     init_map: PathBuf,
     /// The refinement.
-    #[arg(long, value_enum, default_value_t = RefineKind::Zoomout)]
-    refine: RefineKind,
+    #[arg(long, value_parser = refiner_kind_parser(), default_value = "zoomout")]
+    refine: RefinerKind,
     /// Size of the map's functional map (k x k) that the refinement starts
     /// from (ZoomOut: at least START).
     #[arg(long, short = 'k', default_value_t = MatchParams::default().k)]
@@ -43,7 +44,7 @@ pub(crate) struct RefineArgs {
 /// The refinement for meshes of `sizes.0` and `sizes.1` vertices.
 fn refinement(args: &RefineArgs, sizes: (usize, usize)) -> Result<Refinement, Failure> {
     let options = args.refiner.options(args.k, false, false, sizes);
-    fmaps::pipeline::named_refinement(args.refine.kind(), &options)
+    fmaps::pipeline::named_refinement(args.refine, &options)
         .map_err(crate::match_cmd::zoomout_failure)
 }
 

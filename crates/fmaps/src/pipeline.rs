@@ -167,7 +167,7 @@ impl Refinement {
     /// The refinement `fmaps match` runs when no refinement is asked for:
     /// Smooth Shells ([`refine::SmoothShells::default`]), chosen by
     /// measurement as the most accurate on every collection (near-isometric
-    /// and non-isometric; README's table has the errors and times). It
+    /// and non-isometric; docs/benchmarks.md has the errors and times). It
     /// needs 200 eigenpairs per shape, so meshes of more than 200
     /// vertices. [`MatchParams::default`] keeps the initial map
     /// ([`Refinement::None`]): the building block the refiners start from.
@@ -201,7 +201,7 @@ impl Refinement {
 /// and 20, keeping the result of lowest area distortion
 /// ([`StartSelection::Area`]). Measured with exact geodesics against the
 /// previous default (starts 50, 20, 30, best orientation kept), mean
-/// error x100 on the first test pairs (README): TOSCA_Isometric 4.11 ->
+/// error x100 on the first test pairs: TOSCA_Isometric 4.11 ->
 /// 2.65, FAUST 5.89 -> 3.60, generated-iso 2.46 -> 2.43,
 /// generated-noniso 39.2 -> 37.4, at the same number of runs.
 /// [`MatchParams::default`] stays the literature's single start.
@@ -330,7 +330,7 @@ pub enum StartSelection {
     /// The lowest area distortion (area-weighted `|ln(image area / area)|`
     /// over the triangles, both shapes at unit area): a map that sends a
     /// part to the wrong one stretches or shrinks it. The default: closest
-    /// to the best start on every collection measured (README).
+    /// to the best start on every collection measured.
     #[default]
     Area,
 }
@@ -343,7 +343,7 @@ impl MatchParams {
     /// for ZoomOut 50 → 150, 128 without refinement): eigenpairs beyond it
     /// would never be read. On every 10th FAUST and TOSCA test pair the
     /// three-start ZoomOut gives the same mean errors from 150 eigenpairs
-    /// as from 200 (README).
+    /// as from 200.
     pub fn k_process_needed(&self) -> usize {
         let starts = self.starts.iter().copied().max().unwrap_or(0);
         self.k_descr

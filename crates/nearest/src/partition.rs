@@ -272,7 +272,7 @@ pub fn cluster_columns(d: usize) -> usize {
 /// full-size search after iterations on samples): about `√(n/5)`, at least
 /// [`PartitionParams::ball_size`]. That balances a query's comparisons
 /// with the n / size centres against the rows of the ~5 balls it opens
-/// (README: on FAUST's 80k pair, 126 rows per ball make the initial point
+/// (docs/tuning.md: on FAUST's 80k pair, 126 rows per ball make the initial point
 /// map and the final search of a sampled ZoomOut about twice as fast as
 /// 24, the same maps). Searches with the previous iteration's map as
 /// guesses open fewer balls and keep [`PartitionParams::ball_size`]

@@ -58,7 +58,7 @@
 //! least squares in τ); the proposals are independent draws, the best
 //! kept (optionally the best `finalists` run the whole alignment and the
 //! lowest final energy wins); 60 random proposals for each of two
-//! orientations instead of 100 for one (README).
+//! orientations instead of 100 for one (docs/benchmarks.md).
 
 mod arap;
 mod level;

@@ -44,7 +44,7 @@ pub struct Subsample {
 /// iterations on samples: `n /` [`fmaps_nearest::coarse_ball_size`]`(n)`
 /// (rows per cluster about `√(n/5)`): on FAUST's 80k pair, 635 cells of
 /// ~126 rows, which search faster than the 5000 samples' cells of ~16
-/// (README, "Large meshes are sampled by default").
+/// (docs/benchmarks.md, "Large meshes: sampled refinement").
 ///
 /// ```
 /// assert_eq!(fmaps_refine::search_cells(80_000), 635);

@@ -151,7 +151,7 @@ fn convert_once(
     // k-means clusters of A's rows, sized for one search without guesses
     // (`coarse_ball_size`): the searched rows (`Φ_A Cᵀ` or `Φ_A`) are a
     // linear image of them, and a search without guesses otherwise
-    // compares most pairs (README: the 80k initial point map).
+    // compares most pairs (docs/tuning.md: the 80k initial point map).
     let params = match fmaps_nearest::Partition::for_one_search(rows_a.view(ka), BALLS_FROM_ROWS) {
         Some(p) => fmaps_nearest::NnParams::with_strategy(fmaps_nearest::NnStrategy::Balls)
             .with_partition(p),

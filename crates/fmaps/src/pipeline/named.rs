@@ -54,6 +54,32 @@ impl RefinerKind {
         }
     }
 
+    /// One line for a user choosing among the kinds: what it does and its
+    /// paper (the command line's `--refine` help, the Python docs).
+    pub fn summary(self) -> &'static str {
+        match self {
+            RefinerKind::None => "no refinement: the descriptor map",
+            RefinerKind::Icp => {
+                "spectral ICP (orthogonal Procrustes) at the map's size (Ovsjanikov et al. 2012)"
+            }
+            RefinerKind::Zoomout => {
+                "ZoomOut spectral upsampling (Melzi et al., SIGGRAPH Asia 2019)"
+            }
+            RefinerKind::BijectiveZoomout => {
+                "bijective ZoomOut: both point maps updated together, each pulled towards the other's inverse (Ren et al., SGP 2021)"
+            }
+            RefinerKind::Discrete => {
+                "the discrete solver on orthogonality, bijectivity, properness and Laplacian commutativity (Ren et al., SGP 2021)"
+            }
+            RefinerKind::Bcicp => {
+                "a repair of the BCICP class: bijective ICP with coverage, continuity and smoothness repairs on the meshes (Ren et al., SIGGRAPH Asia 2018)"
+            }
+            RefinerKind::SmoothShells => {
+                "Smooth Shells: A's shells deformed onto B's coarse to fine, with its own initialisation (Eisenberger et al., CVPR 2020)"
+            }
+        }
+    }
+
     /// What runs when no refinement is named, for meshes whose smaller one
     /// has `smallest` vertices: [`Refinement::recommended`] (Smooth
     /// Shells) where both meshes have more vertices than its basis needs,
@@ -266,7 +292,7 @@ pub const AUTO_SAMPLES_ABOVE: usize = 20_000;
 /// vertex). `fmaps match`, `fmaps batch` and the Python package follow
 /// it and say so. On six FAUST pairs subdivided to 80k vertices the
 /// sampled three-start ZoomOut gives the mean error of the unsampled one
-/// in about a quarter of the time (README).
+/// in about a quarter of the time.
 ///
 /// ```
 /// use fmaps::pipeline::{default_refine_samples, AUTO_REFINE_SAMPLES};
@@ -282,7 +308,7 @@ pub fn default_refine_samples(n_a: usize, n_b: usize) -> Option<usize> {
 /// middle of the schedule, `(k_start + k_final) / 2` (100 for 50:150:5),
 /// when that is strictly between its ends; `None` for other refinements.
 /// The starts' maps at that size already tell which one converges to the
-/// right branch (README: the same errors on FAUST and TOSCA, a third less
+/// right branch (measured: the same errors on FAUST and TOSCA, a third less
 /// time than running every start to the end).
 pub fn default_select_at(refine: &Refinement) -> Option<usize> {
     match refine {

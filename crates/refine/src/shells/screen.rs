@@ -20,8 +20,8 @@ impl SmoothShells {
     /// time; this setting wins it back with 500 initialisation samples
     /// instead of 1000 and 30 random proposals per aligned orientation
     /// instead of 60 (60 dealt among the eight), so it takes about the
-    /// default's time (README's accuracy table). On the 30 generated
-    /// non-isometric pairs (README, exact geodesics) it lowers the mean
+    /// default's time (the accuracy table of docs/benchmarks.md). On the 30 generated
+    /// non-isometric pairs (docs/benchmarks.md, exact geodesics) it lowers the mean
     /// geodesic error from the default's 15.8 x100 to 10.5 (10.7 with
     /// 1000 samples and 60 proposals, 10.4 with 500 and 60: the
     /// difference is a few pairs' orientation choices, within the
