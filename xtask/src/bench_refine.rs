@@ -105,7 +105,11 @@ fn large(args: &Args, c: &Collection, a: &str, b: &str) -> anyhow::Result<()> {
         ..ZoomOut::default()
     };
     let t_fps = t.elapsed().as_secs_f64();
-    let out = pool.install(|| zo.refine(&init.c_ba, &pb.basis, &pa.basis))?;
+    let out = pool.install(|| {
+        zo.refine(&fmaps::refine::RefineInput::new(
+            &init.c_ba, &pb.basis, &pa.basis,
+        ))
+    })?;
     let t_zoomout = out.report.seconds;
     println!(
         "{} {a} -> {b} subdivided twice: {} and {} vertices, {} thread(s)",
@@ -220,7 +224,7 @@ pub fn bench_refine(args: &Args) -> anyhow::Result<()> {
             step: 5,
             ..ZoomOut::default()
         }
-        .refine(&c0, basis_1, basis_2)
+        .refine(&fmaps::refine::RefineInput::new(&c0, basis_1, basis_2))
     })?;
     println!(
         "\nnearest neighbours, {} queries among {} rows (data Φ_B Cᵀ, queries Φ_A)",
@@ -392,8 +396,11 @@ pub fn bench_refine(args: &Args) -> anyhow::Result<()> {
     );
     let mut ref_rows = Vec::new();
     for (name, refiner, peer_args) in &cases {
-        let (t_ours, out) =
-            pool.install(|| time(args.bench.repeat, || refiner.refine(&c0, basis_1, basis_2)));
+        let (t_ours, out) = pool.install(|| {
+            time(args.bench.repeat, || {
+                refiner.refine(&fmaps::refine::RefineInput::new(&c0, basis_1, basis_2))
+            })
+        });
         let out = out?;
         let map_path = work.join(format!("pyfm-{}.txt", name.replace([' ', ':'], "_")));
         let r = run(Command::new(&py)

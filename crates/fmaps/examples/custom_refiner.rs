@@ -12,14 +12,12 @@
 use std::sync::Arc;
 use std::time::Instant;
 
-use fmaps::eigensolve::SpectralBasis;
 use fmaps::pipeline::{MatchParams, Refinement, match_shapes};
 use fmaps::refine::{
-    Error, Iteration, RefineReport, Refined, Refiner, Result, ZoomOut, conformance,
+    Error, Iteration, RefineInput, RefineReport, Refined, Refiner, Result, ZoomOut, conformance,
 };
 use fmaps::shapes::creature_pair;
 use fmaps::solve::{fmap_from_point_map, point_map_from_fmap};
-use nalgebra::DMatrix;
 
 /// ZoomOut from `k_start` to `k_final` in steps of `step`.
 struct PlainZoomOut {
@@ -40,12 +38,8 @@ impl Refiner for PlainZoomOut {
         self.k_final
     }
 
-    fn refine(
-        &self,
-        c_ab: &DMatrix<f64>,
-        basis_a: &SpectralBasis,
-        basis_b: &SpectralBasis,
-    ) -> Result<Refined> {
+    fn refine(&self, input: &RefineInput<'_>) -> Result<Refined> {
+        let (c_ab, basis_a, basis_b) = (input.c_ab, input.basis_a, input.basis_b);
         let t0 = Instant::now();
         let (kf, k0) = (self.k_final, self.k_start);
         if k0 == 0 || self.step == 0 || kf < k0 || c_ab.nrows() < k0 || c_ab.ncols() < k0 {

@@ -748,12 +748,10 @@ pub fn refine_result(
     // is applied to the pair (B, A), and its t_ba is our T_AB.
     // The unrefined point map is the conversion of C_BA that the
     // refiner's first search repeats: its guess.
-    let refined = refiner.refine_with_guess(
-        &out.c_ba,
-        &b.basis,
-        &a.basis,
-        (b.geometry(), a.geometry()),
-        &out.t_ab,
+    let refined = refiner.refine(
+        &refine::RefineInput::new(&out.c_ba, &b.basis, &a.basis)
+            .with_geometry(b.geometry(), a.geometry())
+            .with_guess(&out.t_ab),
     )?;
     out.c_ba = refined.c_ab;
     out.t_ab = refined.t_ba;

@@ -83,7 +83,7 @@ pub fn check(refiner: &dyn Refiner) -> Result<(), Failure> {
                what: &'static str|
      -> Result<Vec<usize>, Failure> {
         let r = refiner
-            .refine(c, basis_a, basis_b)
+            .refine(&crate::RefineInput::new(c, basis_a, basis_b))
             .map_err(|e| fail(what, e.to_string()))?;
         if r.t_ba.len() != basis_b.n() {
             return Err(fail(
@@ -153,7 +153,10 @@ pub fn check(refiner: &dyn Refiner) -> Result<(), Failure> {
 
     // 4. A map larger than the bases is an error.
     let big = DMatrix::identity(K + 1, K + 1);
-    if refiner.refine(&big, &a, &b).is_ok() {
+    if refiner
+        .refine(&crate::RefineInput::new(&big, &a, &b))
+        .is_ok()
+    {
         return Err(fail(
             "oversized map",
             format!(

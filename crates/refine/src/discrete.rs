@@ -269,12 +269,8 @@ impl Refiner for DiscreteOp {
         }))
     }
 
-    fn refine(
-        &self,
-        c_ab: &DMatrix<f64>,
-        basis_a: &SpectralBasis,
-        basis_b: &SpectralBasis,
-    ) -> Result<Refined> {
+    fn refine(&self, input: &crate::RefineInput<'_>) -> Result<Refined> {
+        let (c_ab, basis_a, basis_b) = (input.c_ab, input.basis_a, input.basis_b);
         let t0 = Instant::now();
         self.check(c_ab, basis_a, basis_b)?;
         let kf = self.k_final;

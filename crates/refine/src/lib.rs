@@ -23,7 +23,7 @@
 //! - [`Repair`]: a repair of the BCICP class (Ren, Poulenard, Wonka,
 //!   Ovsjanikov, SIGGRAPH Asia 2018): bijective ICP in the spectral
 //!   domain alternated with coverage, continuity and smoothness repairs of
-//!   both point maps on the meshes ([`Refiner::refine_with_geometry`]).
+//!   both point maps on the meshes ([`RefineInput::with_geometry`]).
 //! - [`SmoothShells`] (Eisenberger, Lähner, Cremers, CVPR 2020): the
 //!   shapes' smooth shells aligned coarse to fine by a deformation field
 //!   and a functional map in a product space, after its own
@@ -40,7 +40,7 @@
 //! and independent of the thread count.
 //!
 //! ```
-//! use fmaps_refine::{Refiner, ZoomOut};
+//! use fmaps_refine::{RefineInput, Refiner, ZoomOut};
 //! # use fmaps_eigensolve::{EigenProblem, EigenSolver, NativeSolver};
 //! # use fmaps_laplacian::{cotan_laplacian, LaplacianParams};
 //! # let mesh = fmaps_shapes::torus(2.0, 0.7, 24, 11);
@@ -50,7 +50,7 @@
 //! // block up to 40 x 40: the map stays the identity.
 //! let c = nalgebra::DMatrix::<f64>::identity(10, 10);
 //! let zo = ZoomOut { k_start: 10, k_final: 40, step: 5, ..ZoomOut::default() };
-//! let out = zo.refine(&c, &basis, &basis)?;
+//! let out = zo.refine(&RefineInput::new(&c, &basis, &basis))?;
 //! assert_eq!(out.c_ab.shape(), (40, 40));
 //! assert!(out.t_ba.iter().enumerate().all(|(y, &x)| x == y));
 //! println!("{}", out.report);
@@ -62,7 +62,8 @@
 //!     step: 5,
 //!     ..fmaps_refine::DiscreteOp::preset("bijective-zoomout")?
 //! };
-//! assert!(bij.refine(&c, &basis, &basis)?.t_ba.iter().enumerate().all(|(y, &x)| x == y));
+//! let out = bij.refine(&RefineInput::new(&c, &basis, &basis))?;
+//! assert!(out.t_ba.iter().enumerate().all(|(y, &x)| x == y));
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
 #![deny(missing_docs)]
@@ -225,7 +226,7 @@ impl fmt::Display for RefineReport {
     }
 }
 
-/// A shape's vertices and triangles, for [`Refiner::refine_with_geometry`].
+/// A shape's vertices and triangles, for [`RefineInput::with_geometry`].
 #[derive(Debug, Clone, Copy)]
 pub struct ShapeGeometry<'a> {
     /// Vertex positions (the rows of the shape's basis, in order).
@@ -234,63 +235,97 @@ pub struct ShapeGeometry<'a> {
     pub faces: &'a [[usize; 3]],
 }
 
+/// What a refinement starts from: the functional map and both bases, and,
+/// where the caller has them, the shapes' geometry and a guess of the
+/// point map. Build it with [`RefineInput::new`] and add the optional parts
+/// with [`with_geometry`](Self::with_geometry) and
+/// [`with_guess`](Self::with_guess).
+#[derive(Clone, Copy)]
+#[non_exhaustive]
+pub struct RefineInput<'a> {
+    /// The functional map A → B, k_B x k_A (its sizes select the leading
+    /// eigenpairs of each basis).
+    pub c_ab: &'a DMatrix<f64>,
+    /// Shape A's eigenbasis.
+    pub basis_a: &'a SpectralBasis,
+    /// Shape B's eigenbasis.
+    pub basis_b: &'a SpectralBasis,
+    /// Both shapes' vertex positions and triangles (rows in the order of
+    /// the bases), for refiners that work on the surfaces as well
+    /// ([`Repair`], [`SmoothShells`]: an error without them).
+    pub geometry: Option<(ShapeGeometry<'a>, ShapeGeometry<'a>)>,
+    /// A guess of the point map `T_BA` (one vertex of A per vertex of B),
+    /// e.g. the conversion of `c_ab` a pipeline has already made: refiners
+    /// whose first step converts `c_ab` by an exact nearest-neighbour
+    /// search (ZoomOut, ICP) start that search from it, which only makes
+    /// it faster: the result is the same for any guess. A guess of the
+    /// wrong length is ignored.
+    pub t_ba_guess: Option<&'a [usize]>,
+}
+
+impl<'a> RefineInput<'a> {
+    /// The functional map and the bases, without geometry or guess.
+    pub fn new(
+        c_ab: &'a DMatrix<f64>,
+        basis_a: &'a SpectralBasis,
+        basis_b: &'a SpectralBasis,
+    ) -> Self {
+        RefineInput {
+            c_ab,
+            basis_a,
+            basis_b,
+            geometry: None,
+            t_ba_guess: None,
+        }
+    }
+
+    /// With both shapes' geometry.
+    pub fn with_geometry(self, a: ShapeGeometry<'a>, b: ShapeGeometry<'a>) -> Self {
+        RefineInput {
+            geometry: Some((a, b)),
+            ..self
+        }
+    }
+
+    /// With a guess of the point map B → A.
+    pub fn with_guess(self, t_ba: &'a [usize]) -> Self {
+        RefineInput {
+            t_ba_guess: Some(t_ba),
+            ..self
+        }
+    }
+
+    /// The geometry, or the error saying that `what` needs it.
+    pub(crate) fn geometry_for(
+        &self,
+        what: &str,
+    ) -> Result<(ShapeGeometry<'a>, ShapeGeometry<'a>)> {
+        self.geometry.ok_or_else(|| {
+            Error::InvalidParameter(format!(
+                "{what} works on the shapes as well as their bases: give their geometry (RefineInput::with_geometry)"
+            ))
+        })
+    }
+}
+
 /// A refinement of a functional map between two shapes.
 ///
-/// `c_ab` is k_B x k_A (its sizes select the leading eigenpairs of each
-/// basis); the result holds the refined map and the point map B → A it
-/// induces.
+/// The input's `c_ab` is k_B x k_A (its sizes select the leading
+/// eigenpairs of each basis); the result holds the refined map and the
+/// point map B → A it induces.
 pub trait Refiner: Send + Sync {
     /// A short name with the parameters (for reports and tables).
     fn name(&self) -> String;
 
-    /// Refines `c_ab`.
-    fn refine(
-        &self,
-        c_ab: &DMatrix<f64>,
-        basis_a: &SpectralBasis,
-        basis_b: &SpectralBasis,
-    ) -> Result<Refined>;
+    /// Refines `input.c_ab` (with the geometry and the guess where the
+    /// refiner uses them).
+    fn refine(&self, input: &RefineInput<'_>) -> Result<Refined>;
 
     /// Eigenpairs per shape the refinement needs beyond the size of the
     /// map it is given (ZoomOut: its final size); a pipeline computes at
     /// least this many. Default 0.
     fn k_needed(&self) -> usize {
         0
-    }
-
-    /// [`Refiner::refine`] with the two shapes' geometry (vertex positions
-    /// and triangles, rows in the order of `basis_a` and `basis_b`), for
-    /// refiners that work in the point domain as well ([`Repair`]).
-    /// Default: the geometry is not needed, [`Refiner::refine`].
-    fn refine_with_geometry(
-        &self,
-        c_ab: &DMatrix<f64>,
-        basis_a: &SpectralBasis,
-        basis_b: &SpectralBasis,
-        geometry_a: ShapeGeometry<'_>,
-        geometry_b: ShapeGeometry<'_>,
-    ) -> Result<Refined> {
-        let _ = (geometry_a, geometry_b);
-        self.refine(c_ab, basis_a, basis_b)
-    }
-
-    /// [`Refiner::refine_with_geometry`] given a guess of the point map
-    /// `T_BA` (one vertex of A per vertex of B), e.g. the conversion of
-    /// `c_ab` a pipeline has already made: refiners whose first step
-    /// converts `c_ab` by an exact nearest-neighbour search (ZoomOut, ICP)
-    /// start that search from the guess, which only makes it faster: the
-    /// result is the same for any guess. A guess of the wrong length is
-    /// ignored. Default: the guess is not used.
-    fn refine_with_guess(
-        &self,
-        c_ab: &DMatrix<f64>,
-        basis_a: &SpectralBasis,
-        basis_b: &SpectralBasis,
-        geometry: (ShapeGeometry<'_>, ShapeGeometry<'_>),
-        t_ba_guess: &[usize],
-    ) -> Result<Refined> {
-        let _ = t_ba_guess;
-        self.refine_with_geometry(c_ab, basis_a, basis_b, geometry.0, geometry.1)
     }
 
     /// The same refiner for an initial map of size `k` when it reads a
@@ -314,14 +349,6 @@ pub(crate) fn growth_schedule(k_start: usize, k_final: usize, step: usize) -> Ve
         out.push(k);
     }
     out
-}
-
-/// The error of [`Refiner::refine`] for a refiner that works on the
-/// surfaces as well (`what` names it).
-fn needs_geometry(what: &str) -> Error {
-    Error::InvalidParameter(format!(
-        "{what} works on the shapes as well as their bases: call refine_with_geometry"
-    ))
 }
 
 /// Errors unless each geometry has one vertex per basis row and its

@@ -31,14 +31,13 @@
 //!      least summed distance to the others).
 //!
 //! Steps 2-3 are repeated `iterations` times. It needs the shapes'
-//! geometry ([`Refiner::refine_with_geometry`]); `fmaps match --refine
+//! geometry ([`RefineInput::with_geometry`](crate::RefineInput::with_geometry)); `fmaps match --refine
 //! bcicp` and [`crate::Refiner`] pipelines pass it.
 
 use std::cmp::Ordering;
 use std::collections::BinaryHeap;
 use std::time::Instant;
 
-use fmaps_eigensolve::SpectralBasis;
 use fmaps_solve::convert::{BasisRows, pullback};
 use nalgebra::DMatrix;
 
@@ -252,23 +251,9 @@ impl Refiner for Repair {
         }))
     }
 
-    fn refine(
-        &self,
-        _c_ab: &DMatrix<f64>,
-        _basis_a: &SpectralBasis,
-        _basis_b: &SpectralBasis,
-    ) -> Result<Refined> {
-        Err(crate::needs_geometry("the BCICP-class repair"))
-    }
-
-    fn refine_with_geometry(
-        &self,
-        c_ab: &DMatrix<f64>,
-        basis_a: &SpectralBasis,
-        basis_b: &SpectralBasis,
-        geo_a: ShapeGeometry<'_>,
-        geo_b: ShapeGeometry<'_>,
-    ) -> Result<Refined> {
+    fn refine(&self, input: &crate::RefineInput<'_>) -> Result<Refined> {
+        let (c_ab, basis_a, basis_b) = (input.c_ab, input.basis_a, input.basis_b);
+        let (geo_a, geo_b) = input.geometry_for("the BCICP-class repair")?;
         let t0 = Instant::now();
         let k = self.size(c_ab);
         if k == 0 {

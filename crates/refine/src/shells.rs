@@ -95,7 +95,7 @@ use fmaps_simd::SplitMix;
 use nalgebra::{DMatrix, Matrix3, Vector3};
 use rayon::prelude::*;
 
-use crate::{Error, Iteration, RefineReport, Refined, Refiner, Result, ShapeGeometry};
+use crate::{Error, Iteration, RefineReport, Refined, Refiner, Result};
 use level::{Alignment, LevelWeights, Samples};
 use rigid::{align_vectors, axis_icp, axis_rotation};
 use shell::Shell;
@@ -644,23 +644,9 @@ impl Refiner for SmoothShells {
         self.k_max + 9
     }
 
-    fn refine(
-        &self,
-        _c_ab: &DMatrix<f64>,
-        _basis_a: &SpectralBasis,
-        _basis_b: &SpectralBasis,
-    ) -> Result<Refined> {
-        Err(crate::needs_geometry("Smooth Shells"))
-    }
-
-    fn refine_with_geometry(
-        &self,
-        c_ab: &DMatrix<f64>,
-        basis_a: &SpectralBasis,
-        basis_b: &SpectralBasis,
-        geo_a: ShapeGeometry<'_>,
-        geo_b: ShapeGeometry<'_>,
-    ) -> Result<Refined> {
+    fn refine(&self, input: &crate::RefineInput<'_>) -> Result<Refined> {
+        let (c_ab, basis_a, basis_b) = (input.c_ab, input.basis_a, input.basis_b);
+        let (geo_a, geo_b) = input.geometry_for("Smooth Shells")?;
         let t0 = Instant::now();
         self.check(basis_a, basis_b)?;
         crate::check_geometry(basis_a, basis_b, &geo_a, &geo_b)?;

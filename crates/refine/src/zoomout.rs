@@ -362,24 +362,8 @@ impl Refiner for ZoomOut {
         s
     }
 
-    fn refine(
-        &self,
-        c_ab: &DMatrix<f64>,
-        basis_a: &SpectralBasis,
-        basis_b: &SpectralBasis,
-    ) -> Result<Refined> {
-        self.run(c_ab, basis_a, basis_b, None)
-    }
-
-    fn refine_with_guess(
-        &self,
-        c_ab: &DMatrix<f64>,
-        basis_a: &SpectralBasis,
-        basis_b: &SpectralBasis,
-        _geometry: (crate::ShapeGeometry<'_>, crate::ShapeGeometry<'_>),
-        t_ba_guess: &[usize],
-    ) -> Result<Refined> {
-        self.run(c_ab, basis_a, basis_b, Some(t_ba_guess))
+    fn refine(&self, input: &crate::RefineInput<'_>) -> Result<Refined> {
+        self.run(input.c_ab, input.basis_a, input.basis_b, input.t_ba_guess)
     }
 }
 

@@ -5,6 +5,7 @@
 
 use fmaps_eigensolve::SpectralBasis;
 use fmaps_mesh_io::TriMesh;
+use fmaps_refine::RefineInput;
 use fmaps_refine::{Error, Icp, Refiner, Subsample, ZoomOut, farthest_point_sampling};
 use fmaps_shapes::torus;
 use fmaps_solve::{fmap_from_point_map, point_map_from_fmap};
@@ -43,6 +44,13 @@ fn permutation(n: usize, seed: u64) -> (Vec<usize>, Vec<usize>) {
 /// `deformed`: B is a differently bumped, bent torus (nearly isometric);
 /// otherwise B is A stretched by a few percent, which the low spectrum
 /// does not see (the true map converts exactly).
+impl Pair {
+    /// The refinement input of `c` (A → B) between the pair's bases.
+    fn input<'a>(&'a self, c: &'a DMatrix<f64>) -> RefineInput<'a> {
+        RefineInput::new(c, &self.basis_a, &self.basis_b)
+    }
+}
+
 fn pair(k: usize, deformed: bool) -> Pair {
     let (mut v, f) = torus(2.0, 0.8, 44, 18).into_parts();
     for (i, p) in v.iter_mut().enumerate() {
@@ -138,7 +146,7 @@ fn an_exact_map_stays_exact() {
         point_map_from_fmap(&c, &p.basis_a, &p.basis_b).unwrap(),
         p.t_ba
     );
-    let icp = Icp::default().refine(&c, &p.basis_a, &p.basis_b).unwrap();
+    let icp = Icp::default().refine(&p.input(&c)).unwrap();
     assert_eq!(icp.t_ba, p.t_ba);
     assert!(icp.report.converged, "{}", icp.report);
     let zo = ZoomOut {
@@ -147,7 +155,7 @@ fn an_exact_map_stays_exact() {
         step: 4,
         ..ZoomOut::default()
     }
-    .refine(&c, &p.basis_a, &p.basis_b)
+    .refine(&p.input(&c))
     .unwrap();
     assert_eq!(zo.t_ba, p.t_ba);
     assert_eq!(zo.c_ab.shape(), (60, 60));
@@ -164,7 +172,7 @@ fn zoomout_recovers_a_low_rank_truncation() {
     let p = pair(60, true);
     let c6 = true_fmap(&p, 6);
     let before = fmap_error(&p, &c6);
-    let zo = zoomout(6, 60).refine(&c6, &p.basis_a, &p.basis_b).unwrap();
+    let zo = zoomout(6, 60).refine(&p.input(&c6)).unwrap();
     let after = error(&p, &zo.t_ba);
     assert!(after < 0.2 * before, "before {before}, after {after}");
     // The iterations shrink the changes of the point map.
@@ -177,12 +185,12 @@ fn refiners_reduce_the_error_of_a_noisy_map() {
     let p = pair(60, true);
     let c = noisy(&true_fmap(&p, 20), 0.15, 7);
     let before = fmap_error(&p, &c);
-    let icp = Icp::default().refine(&c, &p.basis_a, &p.basis_b).unwrap();
+    let icp = Icp::default().refine(&p.input(&c)).unwrap();
     let e_icp = error(&p, &icp.t_ba);
     // ICP returns an orthonormal map.
     let ctc = icp.c_ab.tr_mul(&icp.c_ab);
     assert!((ctc - DMatrix::identity(20, 20)).amax() < 1e-10);
-    let zo = |z: ZoomOut| error(&p, &z.refine(&c, &p.basis_a, &p.basis_b).unwrap().t_ba);
+    let zo = |z: ZoomOut| error(&p, &z.refine(&p.input(&c)).unwrap().t_ba);
     let base = zoomout(20, 60);
     let e_zo = zo(base.clone());
     let e_adj = zo(ZoomOut {
@@ -210,7 +218,7 @@ fn subsampled_zoomout_is_close_to_the_full_one() {
     let c = noisy(&true_fmap(&p, 20), 0.15, 7);
     let before = fmap_error(&p, &c);
     let base = zoomout(20, 60);
-    let full = error(&p, &base.refine(&c, &p.basis_a, &p.basis_b).unwrap().t_ba);
+    let full = error(&p, &base.refine(&p.input(&c)).unwrap().t_ba);
     let sub = Subsample::farthest(p.a.vertices(), p.b.vertices(), 500);
     assert_eq!(sub.a, farthest_point_sampling(p.a.vertices(), 500, 0));
     assert_eq!(sub.b, farthest_point_sampling(p.b.vertices(), 500, 0));
@@ -218,7 +226,7 @@ fn subsampled_zoomout_is_close_to_the_full_one() {
         subsample: Some(sub.clone()),
         ..base.clone()
     };
-    let out = z.refine(&c, &p.basis_a, &p.basis_b).unwrap();
+    let out = z.refine(&p.input(&c)).unwrap();
     assert_eq!(out.t_ba.len(), p.b.vertices().len());
     // The final map (searched from each vertex's nearest sample's image)
     // is the exact conversion of the final C, as without those guesses.
@@ -233,7 +241,7 @@ fn subsampled_zoomout_is_close_to_the_full_one() {
         }),
         ..base.clone()
     }
-    .refine(&c, &p.basis_a, &p.basis_b)
+    .refine(&p.input(&c))
     .unwrap();
     assert_eq!(unguided.t_ba, out.t_ba);
     // One iteration on every vertex after the samples: the fit of the
@@ -242,7 +250,7 @@ fn subsampled_zoomout_is_close_to_the_full_one() {
         full_iterations: 1,
         ..z.clone()
     };
-    let one = z1.refine(&c, &p.basis_a, &p.basis_b).unwrap();
+    let one = z1.refine(&p.input(&c)).unwrap();
     assert_eq!(one.report.iterations.len(), out.report.iterations.len() + 1);
     assert!(
         z1.name().ends_with("samples 500/500 + 1 on every vertex"),
@@ -269,7 +277,7 @@ fn subsampled_zoomout_is_close_to_the_full_one() {
             }),
             ..base.clone()
         }
-        .refine(&c, &p.basis_a, &p.basis_b)
+        .refine(&p.input(&c))
         .unwrap_err();
         assert!(matches!(err, Error::InvalidParameter(_)), "{err}");
     }
@@ -289,7 +297,7 @@ fn subsampled_zoomout_is_close_to_the_full_one() {
         subsample: Some(few),
         ..base.clone()
     }
-    .refine(&c, &p.basis_a, &p.basis_b)
+    .refine(&p.input(&c))
     .unwrap_err();
     assert!(matches!(err, Error::InvalidParameter(_)), "{err}");
     let bad = Subsample {
@@ -302,7 +310,7 @@ fn subsampled_zoomout_is_close_to_the_full_one() {
         subsample: Some(bad),
         ..base
     }
-    .refine(&c, &p.basis_a, &p.basis_b)
+    .refine(&p.input(&c))
     .unwrap_err();
     assert_eq!(
         err,
@@ -331,7 +339,7 @@ fn results_do_not_depend_on_the_thread_count() {
             .num_threads(threads)
             .build()
             .unwrap();
-        pool.install(|| z.refine(&c, &p.basis_a, &p.basis_b).unwrap())
+        pool.install(|| z.refine(&p.input(&c)).unwrap())
     };
     let (one, two) = (run(1), run(2));
     assert_eq!(one.t_ba, two.t_ba);
@@ -344,7 +352,7 @@ fn results_do_not_depend_on_the_thread_count() {
 fn parameter_errors() {
     let p = pair(30, true);
     let c = true_fmap(&p, 20);
-    let r = |z: ZoomOut| z.refine(&c, &p.basis_a, &p.basis_b).unwrap_err();
+    let r = |z: ZoomOut| z.refine(&p.input(&c)).unwrap_err();
     assert_eq!(
         r(ZoomOut {
             k_start: 20,
@@ -388,9 +396,7 @@ fn parameter_errors() {
     );
     let big = DMatrix::<f64>::zeros(40, 40);
     assert_eq!(
-        Icp::default()
-            .refine(&big, &p.basis_a, &p.basis_b)
-            .unwrap_err(),
+        Icp::default().refine(&p.input(&big)).unwrap_err(),
         Error::NotEnoughEigenpairs {
             shape: "A",
             needed: 40,
@@ -434,14 +440,9 @@ fn refiners_pass_the_exported_conformance_check() {
         fn name(&self) -> String {
             "off-by-one".into()
         }
-        fn refine(
-            &self,
-            c_ab: &DMatrix<f64>,
-            a: &SpectralBasis,
-            b: &SpectralBasis,
-        ) -> fmaps_refine::Result<fmaps_refine::Refined> {
-            let mut r = self.0.refine(c_ab, a, b)?;
-            let n = a.n();
+        fn refine(&self, input: &RefineInput<'_>) -> fmaps_refine::Result<fmaps_refine::Refined> {
+            let mut r = self.0.refine(input)?;
+            let n = input.basis_a.n();
             r.t_ba.iter_mut().for_each(|x| *x = (*x + 1) % n);
             Ok(r)
         }
@@ -478,11 +479,9 @@ fn discrete_optimisation_presets() {
         step: 4,
         ..ZoomOut::default()
     }
-    .refine(&c, &p.basis_a, &p.basis_b)
+    .refine(&p.input(&c))
     .unwrap();
-    let dz = discrete("zoomout", 20, 60, 4)
-        .refine(&c, &p.basis_a, &p.basis_b)
-        .unwrap();
+    let dz = discrete("zoomout", 20, 60, 4).refine(&p.input(&c)).unwrap();
     assert_eq!(zo.t_ba, dz.t_ba);
     assert_eq!(dz.c_ab.shape(), (60, 60));
     let adjoint = ZoomOut {
@@ -492,7 +491,7 @@ fn discrete_optimisation_presets() {
         adjoint: true,
         ..ZoomOut::default()
     }
-    .refine(&c, &p.basis_a, &p.basis_b)
+    .refine(&p.input(&c))
     .unwrap();
     let coupling = fmaps_refine::DiscreteOp {
         weights: fmaps_refine::DiscreteWeights {
@@ -503,7 +502,7 @@ fn discrete_optimisation_presets() {
         },
         ..discrete("zoomout", 20, 60, 4)
     };
-    let dc = coupling.refine(&c, &p.basis_a, &p.basis_b).unwrap();
+    let dc = coupling.refine(&p.input(&c)).unwrap();
     assert_eq!(adjoint.t_ba, dc.t_ba);
     assert_eq!(dz.report.iterations.len(), 10);
     // Two searches per size plus the two first conversions.
@@ -513,16 +512,14 @@ fn discrete_optimisation_presets() {
     let c_exact = true_fmap(&exact, 60);
     for preset in ["zoomout", "bijective-zoomout", "discrete"] {
         let r = discrete(preset, 20, 60, 4)
-            .refine(&c_exact, &exact.basis_a, &exact.basis_b)
+            .refine(&RefineInput::new(&c_exact, &exact.basis_a, &exact.basis_b))
             .unwrap();
         assert_eq!(r.t_ba, exact.t_ba, "{preset}");
     }
 
     let before = fmap_error(&p, &c);
     for preset in ["bijective-zoomout", "discrete"] {
-        let r = discrete(preset, 20, 60, 4)
-            .refine(&c, &p.basis_a, &p.basis_b)
-            .unwrap();
+        let r = discrete(preset, 20, 60, 4).refine(&p.input(&c)).unwrap();
         let e = error(&p, &r.t_ba);
         assert!(e < 0.5 * before, "{preset}: before {before}, after {e}");
     }
@@ -531,7 +528,7 @@ fn discrete_optimisation_presets() {
         inner: 0,
         ..discrete("discrete", 20, 60, 4)
     };
-    assert!(bad.refine(&c, &p.basis_a, &p.basis_b).is_err());
+    assert!(bad.refine(&p.input(&c)).is_err());
 }
 
 fn geometry(m: &TriMesh) -> fmaps_refine::ShapeGeometry<'_> {
@@ -548,7 +545,10 @@ fn the_repair_keeps_an_exact_map_and_repairs_a_noisy_one() {
     // Identity on a self-map.
     let id = DMatrix::<f64>::identity(20, 20);
     let r = Repair::default()
-        .refine_with_geometry(&id, &p.basis_a, &p.basis_a, geometry(&p.a), geometry(&p.a))
+        .refine(
+            &RefineInput::new(&id, &p.basis_a, &p.basis_a)
+                .with_geometry(geometry(&p.a), geometry(&p.a)),
+        )
         .unwrap();
     assert!(r.t_ba.iter().enumerate().all(|(y, &x)| x == y));
     assert_eq!(r.c_ab.shape(), (20, 20));
@@ -558,7 +558,7 @@ fn the_repair_keeps_an_exact_map_and_repairs_a_noisy_one() {
     let c = noisy(&true_fmap(&p, 20), 0.15, 7);
     let before = fmap_error(&p, &c);
     let r = Repair::default()
-        .refine_with_geometry(&c, &p.basis_a, &p.basis_b, geometry(&p.a), geometry(&p.b))
+        .refine(&p.input(&c).with_geometry(geometry(&p.a), geometry(&p.b)))
         .unwrap();
     let after = error(&p, &r.t_ba);
     assert!(after < 0.5 * before, "before {before}, after {after}");
@@ -572,16 +572,12 @@ fn the_repair_keeps_an_exact_map_and_repairs_a_noisy_one() {
     let nn = point_map_from_fmap(&c, &p.basis_a, &p.basis_b).unwrap();
     assert!(hit(&r.t_ba) > hit(&nn), "{} vs {}", hit(&r.t_ba), hit(&nn));
     // Without the geometry it refuses rather than guessing.
-    assert!(
-        Repair::default()
-            .refine(&c, &p.basis_a, &p.basis_b)
-            .is_err()
-    );
+    assert!(Repair::default().refine(&p.input(&c)).is_err());
     // Geometry that does not belong to the bases is refused.
     let tiny = fmaps_shapes::icosphere(1.0, 1);
     assert!(
         Repair::default()
-            .refine_with_geometry(&c, &p.basis_a, &p.basis_b, geometry(&tiny), geometry(&p.b))
+            .refine(&p.input(&c).with_geometry(geometry(&tiny), geometry(&p.b)))
             .is_err()
     );
 }
@@ -640,14 +636,14 @@ fn smooth_shells_finds_the_identity_and_a_rotated_renumbered_copy() {
     let id = DMatrix::<f64>::identity(20, 20);
     // A shape to itself: exactly the identity.
     let r = shells()
-        .refine_with_geometry(&id, &ba, &ba, geometry(&a), geometry(&a))
+        .refine(&RefineInput::new(&id, &ba, &ba).with_geometry(geometry(&a), geometry(&a)))
         .unwrap();
     assert!(r.t_ba.iter().enumerate().all(|(y, &x)| x == y));
     // The moved copy: the rigid step turns it back, the alignment finds
     // the renumbering (the input map, the identity, is wrong for it and
     // only one proposal among others).
     let r = shells()
-        .refine_with_geometry(&id, &ba, &bb, geometry(&a), geometry(&b))
+        .refine(&RefineInput::new(&id, &ba, &bb).with_geometry(geometry(&a), geometry(&b)))
         .unwrap();
     let right = r.t_ba.iter().zip(&perm).filter(|(x, y)| x == y).count();
     assert!(
@@ -661,7 +657,7 @@ fn smooth_shells_finds_the_identity_and_a_rotated_renumbered_copy() {
         ..shells()
     };
     let r = screened
-        .refine_with_geometry(&id, &ba, &bb, geometry(&a), geometry(&b))
+        .refine(&RefineInput::new(&id, &ba, &bb).with_geometry(geometry(&a), geometry(&b)))
         .unwrap();
     let right = r.t_ba.iter().zip(&perm).filter(|(x, y)| x == y).count();
     assert!(
@@ -670,16 +666,17 @@ fn smooth_shells_finds_the_identity_and_a_rotated_renumbered_copy() {
     );
     // It needs the geometry, bases large enough for its shells, geometry
     // that belongs to the bases.
-    assert!(shells().refine(&id, &ba, &bb).is_err());
+    assert!(shells().refine(&RefineInput::new(&id, &ba, &bb)).is_err());
     let small = basis(&a, 30);
     assert!(matches!(
-        shells().refine_with_geometry(&id, &small, &bb, geometry(&a), geometry(&b)),
+        shells()
+            .refine(&RefineInput::new(&id, &small, &bb).with_geometry(geometry(&a), geometry(&b))),
         Err(Error::NotEnoughEigenpairs { needed: 49, .. })
     ));
     let tiny = fmaps_shapes::icosphere(1.0, 1);
     assert!(
         shells()
-            .refine_with_geometry(&id, &ba, &bb, geometry(&tiny), geometry(&b))
+            .refine(&RefineInput::new(&id, &ba, &bb).with_geometry(geometry(&tiny), geometry(&b)))
             .is_err()
     );
 }
@@ -700,7 +697,7 @@ fn smooth_shells_reflects_for_a_mirrored_copy_and_the_orientation_score_tells() 
             reflect,
             ..shells()
         }
-        .refine_with_geometry(&id, &ba, &bb, geometry(&a), geometry(&b))
+        .refine(&RefineInput::new(&id, &ba, &bb).with_geometry(geometry(&a), geometry(&b)))
         .unwrap();
         let right = r.t_ba.iter().zip(&perm).filter(|(x, y)| x == y).count();
         let score = fmaps_refine::orientation_score(
@@ -758,15 +755,13 @@ fn a_guess_of_the_first_map_changes_nothing() {
         } else {
             c.view((0, 0), (20, 20)).into_owned()
         };
-        let plain = r.refine(&c0, &p.basis_a, &p.basis_b).unwrap();
+        let plain = r.refine(&p.input(&c0)).unwrap();
         for guess in [&exact, &shifted, &wild, &short] {
             let g = r
-                .refine_with_guess(
-                    &c0,
-                    &p.basis_a,
-                    &p.basis_b,
-                    (geometry(&p.a), geometry(&p.b)),
-                    guess,
+                .refine(
+                    &p.input(&c0)
+                        .with_geometry(geometry(&p.a), geometry(&p.b))
+                        .with_guess(guess),
                 )
                 .unwrap();
             assert_eq!(g.t_ba, plain.t_ba, "{}", r.name());

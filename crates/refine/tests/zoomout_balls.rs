@@ -8,6 +8,7 @@
 //! `FMAPS_NO_AMX=1` and with `FMAPS_NO_AMX=1 FMAPS_NO_BALLS=1`, and
 //! compares the maps they print.
 
+use fmaps_refine::RefineInput;
 use fmaps_refine::{Icp, Refiner, Subsample, ZoomOut};
 use nalgebra::DMatrix;
 
@@ -87,9 +88,11 @@ fn zoomout_maps() {
         let r = if name == "icp" {
             // At k = 40 (its clusters from 33 dimensions), from the first
             // ZoomOut's map.
-            let start = zo.refine(&c0, &basis_a, &basis_b).unwrap();
+            let start = zo
+                .refine(&RefineInput::new(&c0, &basis_a, &basis_b))
+                .unwrap();
             Icp::default()
-                .refine(&start.c_ab, &basis_a, &basis_b)
+                .refine(&RefineInput::new(&start.c_ab, &basis_a, &basis_b))
                 .unwrap()
         } else if name == "zoomout-samples" {
             // Iterations on 1100 samples per shape (their own clusters),
@@ -100,9 +103,12 @@ fn zoomout_maps() {
                 full_iterations: 1,
                 ..zo
             };
-            sampled.refine(&c0, &basis_a, &basis_b).unwrap()
+            sampled
+                .refine(&RefineInput::new(&c0, &basis_a, &basis_b))
+                .unwrap()
         } else {
-            zo.refine(&c0, &basis_a, &basis_b).unwrap()
+            zo.refine(&RefineInput::new(&c0, &basis_a, &basis_b))
+                .unwrap()
         };
         // The iterations did move the map (the comparison is not trivial).
         let moved = r

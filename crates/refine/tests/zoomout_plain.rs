@@ -3,6 +3,7 @@
 //! and cut to each size, and the searches' pruning (the ball clusters of
 //! the 1800 rows without matrix tiles, the tiles with them).
 
+use fmaps_refine::RefineInput;
 use fmaps_refine::{Refiner, ZoomOut};
 use nalgebra::DMatrix;
 
@@ -28,7 +29,9 @@ fn zoomout_equals_the_plain_algorithm() {
         step: 3,
         ..ZoomOut::default()
     };
-    let r = zo.refine(&c0, &basis_a, &basis_b).unwrap();
+    let r = zo
+        .refine(&RefineInput::new(&c0, &basis_a, &basis_b))
+        .unwrap();
     let (phi_a, phi_b) = (&basis_a.eigenvectors, &basis_b.eigenvectors);
     let mass = basis_b.mass.as_slice();
     let nearest = |c: &DMatrix<f64>| -> Vec<usize> {

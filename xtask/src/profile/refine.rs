@@ -42,7 +42,9 @@ pub fn run(argv: Vec<String>) -> Result<(), Box<dyn std::error::Error>> {
     };
     for _ in 0..reps {
         let t = Instant::now();
-        let r = refiner.refine(&init.c_ba, &pb.basis, &pa.basis)?;
+        let r = refiner.refine(&fmaps::refine::RefineInput::new(
+            &init.c_ba, &pb.basis, &pa.basis,
+        ))?;
         println!(
             "{} {:.3} s (nn {:.3} s, map checksum {})",
             refiner.name(),

@@ -82,7 +82,10 @@ pub fn refine_point_map(
     let metrics_init = solve::fmap_metrics(&c_ba_init, &sb.eigenvalues, &sa.eigenvalues)?;
     let orientation_init = orientation_of(t_ab, a, b)?;
     let refined = with_refiner(&params.refine, params.adjoint, a, b, |r| {
-        r.refine_with_geometry(&c_ba_init, &b.basis, &a.basis, b.geometry(), a.geometry())
+        r.refine(
+            &crate::refine::RefineInput::new(&c_ba_init, &b.basis, &a.basis)
+                .with_geometry(b.geometry(), a.geometry()),
+        )
     })
     .transpose()?;
     let (t_ab_out, c_ba, report) = match refined {
