@@ -37,10 +37,10 @@
 
 #![deny(missing_docs)]
 
-#[cfg(target_arch = "x86_64")]
 mod rng;
 pub use rng::SplitMix;
 
+#[cfg(target_arch = "x86_64")]
 use std::sync::OnceLock;
 use std::sync::atomic::{AtomicU8, Ordering};
 
