@@ -477,3 +477,152 @@ fn user_docs_do_not_point_into_the_development_folder() {
          (say FMAPS_DATA, or name the public release): {bad:?}"
     );
 }
+
+/// The modules of one crate's `src/` and, per module, the sibling modules
+/// it uses: `crate::m` names a top-level module, `super::m` a sibling in a
+/// module folder. Comments and inline `mod tests` are left out; `lib.rs`
+/// (the root, which declares every module) and test files are not nodes.
+fn module_edges(
+    src: &str,
+) -> std::collections::BTreeMap<String, std::collections::BTreeSet<String>> {
+    use std::collections::{BTreeMap, BTreeSet};
+    let files: Vec<String> = rust_files()
+        .into_iter()
+        .filter(|f| f.starts_with(&format!("{src}/")))
+        .collect();
+    let mut text = BTreeMap::new();
+    for f in &files {
+        let rel = f[src.len() + 1..]
+            .trim_end_matches(".rs")
+            .replace('/', "::");
+        if rel == "lib" || rel == "main" || rel == "tests" || rel.ends_with("::tests") {
+            continue;
+        }
+        let body = read(f);
+        let body = body
+            .split("#[cfg(test)]\nmod tests")
+            .next()
+            .unwrap_or_default()
+            .lines()
+            .filter(|l| !l.trim_start().starts_with("//"))
+            .collect::<Vec<_>>()
+            .join("\n");
+        text.insert(rel, body);
+    }
+    let names_after = |t: &str, prefix: &str| -> BTreeSet<String> {
+        t.match_indices(prefix)
+            .map(|(i, _)| {
+                t[i + prefix.len()..]
+                    .chars()
+                    .take_while(|c| c.is_alphanumeric() || *c == '_')
+                    .collect::<String>()
+            })
+            .collect()
+    };
+    let mut edges: BTreeMap<String, BTreeSet<String>> = BTreeMap::new();
+    for (m, t) in &text {
+        let top = m.split("::").next().unwrap_or(m).to_string();
+        for n in names_after(t, "crate::") {
+            if n != top && text.contains_key(&n) {
+                edges.entry(top.clone()).or_default().insert(n);
+            }
+        }
+        if let Some((parent, _)) = m.rsplit_once("::") {
+            for n in names_after(t, "super::") {
+                let sibling = format!("{parent}::{n}");
+                if &sibling != m && text.contains_key(&sibling) {
+                    edges.entry(m.clone()).or_default().insert(sibling);
+                }
+            }
+        }
+    }
+    edges
+}
+
+/// A cycle of `edges`, if there is one.
+fn a_cycle(
+    edges: &std::collections::BTreeMap<String, std::collections::BTreeSet<String>>,
+) -> Option<Vec<String>> {
+    fn visit(
+        u: &str,
+        edges: &std::collections::BTreeMap<String, std::collections::BTreeSet<String>>,
+        state: &mut std::collections::BTreeMap<String, u8>,
+        path: &mut Vec<String>,
+    ) -> Option<Vec<String>> {
+        state.insert(u.to_string(), 1);
+        path.push(u.to_string());
+        for v in edges.get(u).into_iter().flatten() {
+            match state.get(v) {
+                Some(1) => {
+                    let at = path.iter().position(|p| p == v).unwrap_or(0);
+                    let mut cycle = path[at..].to_vec();
+                    cycle.push(v.clone());
+                    return Some(cycle);
+                }
+                Some(_) => {}
+                None => {
+                    if let Some(c) = visit(v, edges, state, path) {
+                        return Some(c);
+                    }
+                }
+            }
+        }
+        state.insert(u.to_string(), 2);
+        path.pop();
+        None
+    }
+    let mut state = std::collections::BTreeMap::new();
+    for u in edges.keys() {
+        if !state.contains_key(u)
+            && let Some(c) = visit(u, edges, &mut state, &mut Vec::new())
+        {
+            return Some(c);
+        }
+    }
+    None
+}
+
+#[test]
+fn the_cycle_finder_sees_a_circle_and_passes_a_chain() {
+    use std::collections::{BTreeMap, BTreeSet};
+    let graph = |pairs: &[(&str, &str)]| {
+        let mut g: BTreeMap<String, BTreeSet<String>> = BTreeMap::new();
+        for (a, b) in pairs {
+            g.entry(a.to_string()).or_default().insert(b.to_string());
+        }
+        g
+    };
+    assert_eq!(
+        a_cycle(&graph(&[
+            ("cpu", "tiles"),
+            ("tiles", "rows"),
+            ("rows", "cpu")
+        ])),
+        Some(vec![
+            "cpu".into(),
+            "tiles".into(),
+            "rows".into(),
+            "cpu".into()
+        ])
+    );
+    assert_eq!(a_cycle(&graph(&[("a", "b"), ("b", "c"), ("a", "c")])), None);
+}
+
+#[test]
+fn modules_import_each_other_in_one_direction() {
+    let mut bad = Vec::new();
+    let mut modules = 0;
+    for dir in crate_dirs() {
+        let src = format!("crates/{dir}/src");
+        let edges = module_edges(&src);
+        modules += edges.len();
+        if let Some(cycle) = a_cycle(&edges) {
+            bad.push(format!("{src}: {}", cycle.join(" -> ")));
+        }
+    }
+    assert!(modules > 20, "only {modules} modules with imports found");
+    assert!(
+        bad.is_empty(),
+        "modules that import each other in a circle (move what both need into a leaf module): {bad:?}"
+    );
+}

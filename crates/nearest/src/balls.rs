@@ -50,15 +50,10 @@ use nalgebra::DMatrix;
 use rayon::prelude::*;
 
 use crate::brute::{scale_for, score_err};
+use crate::partition::{BALL_SIZE, KMEANS_STEPS};
 pub use crate::partition::{Partition, PartitionParams};
 use crate::rows::{Rows, dist2, dist2_below, dot8 as dot};
 
-/// Rows per ball (about; k-means balls vary in size): the default size of
-/// a [`Partition`] ([`PartitionParams::ball_size`]).
-pub(crate) const BALL_SIZE: usize = 24;
-/// Lloyd steps of the default [`Partition::kmeans`]
-/// ([`PartitionParams::kmeans_steps`]).
-pub(crate) const KMEANS_STEPS: usize = 5;
 /// Queries per block (one GEMM against the centres each).
 const QUERY_BLOCK: usize = 64;
 /// Fewest queries per block where the next query's guess lies in another

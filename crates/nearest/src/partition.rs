@@ -208,6 +208,13 @@ fn nearest_centres(centers: &[f64], c_norm: &[f64], d: usize, nb: usize) -> Vec<
     near
 }
 
+/// Rows per ball (about; k-means balls vary in size): the default size of
+/// a [`Partition`] ([`PartitionParams::ball_size`]).
+pub(crate) const BALL_SIZE: usize = 24;
+/// Lloyd steps of the default [`Partition::kmeans`]
+/// ([`PartitionParams::kmeans_steps`]).
+pub(crate) const KMEANS_STEPS: usize = 5;
+
 /// Rows up to which [`Partition::for_balls`] clusters (k-means with local
 /// Lloyd steps above 512 clusters: ~n·24·d per step; above, the default
 /// strategies).
@@ -253,8 +260,8 @@ pub struct PartitionParams {
 impl Default for PartitionParams {
     fn default() -> Self {
         PartitionParams {
-            ball_size: crate::balls::BALL_SIZE,
-            kmeans_steps: crate::balls::KMEANS_STEPS,
+            ball_size: BALL_SIZE,
+            kmeans_steps: KMEANS_STEPS,
             max_rows: BALLS_MAX_ROWS,
             tiled_from_rows: TILED_BALLS_FROM_ROWS,
         }
@@ -284,7 +291,7 @@ pub fn cluster_columns(d: usize) -> usize {
 /// assert_eq!(fmaps_nearest::coarse_ball_size(1000), defaults.ball_size);
 /// ```
 pub fn coarse_ball_size(n: usize) -> usize {
-    ((n as f64 / 5.0).sqrt().round() as usize).max(crate::balls::BALL_SIZE)
+    ((n as f64 / 5.0).sqrt().round() as usize).max(BALL_SIZE)
 }
 
 impl Partition {
@@ -311,7 +318,7 @@ impl Partition {
     /// }
     /// ```
     pub fn for_balls(rows: MatRef<'_, f64>, min_rows: usize) -> Option<Arc<Partition>> {
-        Partition::for_balls_with_steps(rows, min_rows, crate::balls::KMEANS_STEPS)
+        Partition::for_balls_with_steps(rows, min_rows, KMEANS_STEPS)
     }
 
     /// [`for_balls`](Self::for_balls) with `steps` Lloyd steps: fewer
@@ -336,7 +343,7 @@ impl Partition {
         }
         Some(Partition::kmeans(
             rows.subcols(0, cluster_columns(rows.ncols())),
-            crate::balls::BALL_SIZE,
+            BALL_SIZE,
             steps,
         ))
     }
@@ -358,7 +365,7 @@ impl Partition {
         Some(Partition::kmeans(
             rows.subcols(0, cluster_columns(rows.ncols())),
             coarse_ball_size(rows.nrows()),
-            crate::balls::KMEANS_STEPS,
+            KMEANS_STEPS,
         ))
     }
 
