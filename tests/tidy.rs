@@ -6,31 +6,31 @@ use std::path::{Path, PathBuf};
 
 use fmaps_tests::workspace_root;
 
-/// Every `.rs` file of the workspace (crates, xtask, tests), as paths
-/// relative to the root with `/` separators, sorted.
-fn rust_files() -> Vec<String> {
-    fn walk(dir: &Path, out: &mut Vec<PathBuf>) {
+/// The files below `dir` that `keep` accepts (by path and file name), as
+/// paths relative to the root with `/` separators, sorted. Build output,
+/// git's folder, Python caches and hidden folders other than `.ci` are
+/// not entered.
+fn files_below(dir: &Path, keep: &dyn Fn(&Path, &str) -> bool) -> Vec<String> {
+    fn walk(dir: &Path, keep: &dyn Fn(&Path, &str) -> bool, out: &mut Vec<PathBuf>) {
         let Ok(entries) = fs::read_dir(dir) else {
             return;
         };
         for e in entries.flatten() {
             let p = e.path();
-            let name = e.file_name();
-            if name == "target" || name.to_string_lossy().starts_with('.') {
-                continue;
-            }
+            let name = e.file_name().to_string_lossy().into_owned();
             if p.is_dir() {
-                walk(&p, out);
-            } else if p.extension().is_some_and(|x| x == "rs") {
+                let hidden = name.starts_with('.') && name != ".ci";
+                if !(hidden || name == "target" || name == "__pycache__") {
+                    walk(&p, keep, out);
+                }
+            } else if keep(&p, &name) {
                 out.push(p);
             }
         }
     }
     let root = workspace_root();
     let mut files = Vec::new();
-    for top in ["crates", "xtask", "tests", "examples"] {
-        walk(&root.join(top), &mut files);
-    }
+    walk(dir, keep, &mut files);
     let mut rel: Vec<String> = files
         .iter()
         .map(|p| {
@@ -42,6 +42,20 @@ fn rust_files() -> Vec<String> {
         .collect();
     rel.sort();
     rel
+}
+
+/// Every `.rs` file of the workspace (crates, xtask, tests), as paths
+/// relative to the root with `/` separators, sorted.
+fn rust_files() -> Vec<String> {
+    let root = workspace_root();
+    let mut files = Vec::new();
+    for top in ["crates", "xtask", "tests", "examples"] {
+        files.extend(files_below(&root.join(top), &|p, _| {
+            p.extension().is_some_and(|x| x == "rs")
+        }));
+    }
+    files.sort();
+    files
 }
 
 fn read(rel: &str) -> String {
@@ -328,40 +342,13 @@ fn code_comments_carry_no_benchmark_timings() {
 /// scripts, CI), as paths relative to the root: what the repository says
 /// about itself.
 fn text_files() -> Vec<String> {
-    fn walk(dir: &Path, root: &Path, out: &mut Vec<String>) {
-        let Ok(entries) = fs::read_dir(dir) else {
-            return;
-        };
-        for e in entries.flatten() {
-            let p = e.path();
-            let name = e.file_name().to_string_lossy().into_owned();
-            if name == "target" || name == ".git" || name == "__pycache__" {
-                continue;
-            }
-            if p.is_dir() {
-                walk(&p, root, out);
-                continue;
-            }
-            let ext = p.extension().map(|x| x.to_string_lossy().into_owned());
-            let text = matches!(
-                ext.as_deref(),
-                Some("rs" | "md" | "toml" | "py" | "pyi" | "sh" | "txt" | "json" | "yml" | "yaml")
-            ) || name == "run";
-            if text {
-                out.push(
-                    p.strip_prefix(root)
-                        .unwrap()
-                        .to_string_lossy()
-                        .replace('\\', "/"),
-                );
-            }
-        }
-    }
-    let root = workspace_root();
-    let mut out = Vec::new();
-    walk(&root, &root, &mut out);
-    out.sort();
-    out
+    files_below(&workspace_root(), &|p, name| {
+        let ext = p.extension().map(|x| x.to_string_lossy().into_owned());
+        matches!(
+            ext.as_deref(),
+            Some("rs" | "md" | "toml" | "py" | "pyi" | "sh" | "txt" | "json" | "yml" | "yaml")
+        ) || name == "run"
+    })
 }
 
 /// Phrases that narrate how the software was made rather than what it is

@@ -58,8 +58,8 @@ impl BasisFile {
     }
 }
 
-/// The bytes of a cache file (an `.npz` archive) holding `b`.
-pub fn basis_bytes(b: &BasisFile) -> std::io::Result<Vec<u8>> {
+/// The `.npz` archive holding `b`, written to `w`.
+pub fn write_basis_to(w: &mut dyn Write, b: &BasisFile) -> std::io::Result<()> {
     let bad = |m: String| std::io::Error::new(std::io::ErrorKind::InvalidInput, m);
     if b.key.len() > MAX_KEY {
         return Err(bad(format!(
@@ -82,9 +82,8 @@ pub fn basis_bytes(b: &BasisFile) -> std::io::Result<Vec<u8>> {
     npy::write_f64(&mut evals, &[b.k()], &b.eigenvalues)?;
     npy::write_f64(&mut mass, &[b.n()], &b.mass)?;
     npy::write_f64(&mut vectors, &[b.n(), b.k()], &b.vectors)?;
-    let mut out = Vec::with_capacity(vectors.len() + mass.len() + 1024);
     npz::write_archive(
-        &mut out,
+        w,
         &[
             ("format.npy", &format),
             ("key.npy", &key),
@@ -92,15 +91,13 @@ pub fn basis_bytes(b: &BasisFile) -> std::io::Result<Vec<u8>> {
             ("mass.npy", &mass),
             ("eigenvectors.npy", &vectors),
         ],
-    )?;
-    Ok(out)
+    )
 }
 
 /// Writes `b` to `path` atomically (whole or not at all).
 pub fn write_basis(path: impl AsRef<Path>, b: &BasisFile) -> Result<()> {
     let path = path.as_ref();
-    let bytes = basis_bytes(b).map_err(|e| Error::io(path, e))?;
-    crate::atomic::write_atomically(path, |w: &mut dyn Write| w.write_all(&bytes))
+    crate::atomic::write_atomically(path, |w: &mut dyn Write| write_basis_to(w, b))
         .map_err(|e| Error::io(path, e))
 }
 
@@ -205,7 +202,8 @@ mod tests {
 
     #[test]
     fn damaged_files_are_errors() {
-        let bytes = basis_bytes(&sample()).unwrap();
+        let mut bytes = Vec::new();
+        write_basis_to(&mut bytes, &sample()).unwrap();
         assert_eq!(parse_basis(&bytes).unwrap(), sample());
         // Truncated anywhere: an error, never a panic.
         for cut in 0..bytes.len() {
@@ -223,7 +221,9 @@ mod tests {
         // A NaN, with a valid CRC: named by its entry and index.
         let mut nan = sample();
         nan.vectors[4] = f64::NAN;
-        let e = parse_basis(&basis_bytes(&nan).unwrap()).unwrap_err();
+        let mut nan_bytes = Vec::new();
+        write_basis_to(&mut nan_bytes, &nan).unwrap();
+        let e = parse_basis(&nan_bytes).unwrap_err();
         assert!(e.1.contains("eigenvectors[4]"), "{e:?}");
         // Shapes that do not fit together, and another format.
         let archive = |format: &[u8], shape: [usize; 2]| {

@@ -45,7 +45,7 @@ pub fn crc32(data: &[u8]) -> u32 {
 /// Writes an archive of `(name, bytes)` entries, each stored as it is
 /// (names end in `.npy` for `np.load` to give them as arrays, without the
 /// suffix). Entries and the whole archive must stay below 4 GiB.
-pub fn write_archive<W: Write>(w: &mut W, entries: &[(&str, &[u8])]) -> io::Result<()> {
+pub fn write_archive<W: Write + ?Sized>(w: &mut W, entries: &[(&str, &[u8])]) -> io::Result<()> {
     let too_big = || io::Error::new(io::ErrorKind::InvalidInput, "npz: archive over 4 GiB");
     let mut central = Vec::new();
     let mut offset = 0u64;

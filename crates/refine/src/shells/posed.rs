@@ -5,9 +5,10 @@
 //! deform and orient a few thousand vertices instead of all of them; the
 //! normals are oriented by the shape's own sign ([`orientation`](super::shell::orientation)).
 
+use fmaps_mesh_io::vec3::{cross, sub};
 use nalgebra::DMatrix;
 
-use super::shell::{Shell, cross, mul_ref, sub, view};
+use super::shell::{Shell, mul_ref, view};
 
 /// Rows of a product embedding from which `level::search_params` takes the
 /// ball search: above the default samples (2000), so the final point map

@@ -5,7 +5,7 @@
 
 use nalgebra::{DMatrix, Matrix3, Vector3};
 
-pub(super) use fmaps_mesh_io::vec3::{cross, sub};
+use fmaps_mesh_io::vec3::{cross, dot};
 
 /// The sign that orients a mesh's normals outwards: −1 when its signed
 /// volume is negative (a closed mesh whose faces turn inwards), else 1.
@@ -15,8 +15,7 @@ pub(crate) fn orientation(verts: &[[f64; 3]], faces: &[[usize; 3]]) -> f64 {
     let mut volume = 0.0;
     for f in faces {
         let (a, b, c) = (verts[f[0]], verts[f[1]], verts[f[2]]);
-        let bc = cross(b, c);
-        volume += a[0] * bc[0] + a[1] * bc[1] + a[2] * bc[2];
+        volume += dot(a, cross(b, c));
     }
     if volume < 0.0 { -1.0 } else { 1.0 }
 }
