@@ -8,7 +8,7 @@
 
 use fmaps::eval::{EvalParams, GroundTruth, evaluate};
 use fmaps::geodesic::DijkstraSolver;
-use fmaps::pipeline::{MatchParams, Refinement, ZOOMOUT_STARTS, match_shapes};
+use fmaps::pipeline::{MatchParams, Refinement, RefinerKind, default_starts, match_shapes};
 use fmaps::shapes::body::{Body, BodyPose, Build, GeneratedShape, nearest_vertices};
 
 /// The truth of `a -> b`: each vertex of A to the vertex of B nearest to
@@ -42,11 +42,9 @@ fn one_body_in_two_poses_is_matched_closely() {
     // The truth of a shape to itself is the identity: error 0.
     let identity: Vec<usize> = (0..a.mesh.n_vertices()).collect();
     assert_eq!(error(&a, &a, &identity), 0.0);
-    let params = MatchParams {
-        refine: Refinement::default_zoomout(),
-        starts: ZOOMOUT_STARTS.to_vec(),
-        ..MatchParams::default()
-    };
+    let mut params = MatchParams::unrefined();
+    params.refinement = Refinement::default_zoomout();
+    params.starts.sizes = default_starts(RefinerKind::Zoomout, usize::MAX);
     let r = match_shapes(&a.mesh, &b.mesh, &params).unwrap();
     let e = error(&a, &b, &r.t_ab);
     let e_init = error(&a, &b, &r.t_ab_init);
@@ -68,10 +66,8 @@ fn two_builds_matched(refine: Refinement) -> (f64, f64) {
     let b = body
         .shape(&Build::random(12), &BodyPose::walking(), 0.055, 2)
         .unwrap();
-    let params = MatchParams {
-        refine,
-        ..MatchParams::default()
-    };
+    let mut params = MatchParams::unrefined();
+    params.refinement = refine;
     let r = match_shapes(&a.mesh, &b.mesh, &params).unwrap();
     (error(&a, &b, &r.t_ab), error(&a, &b, &r.t_ab_init))
 }
@@ -93,10 +89,8 @@ fn smooth_shells_matches_two_builds_in_two_poses() {
 /// the same pair.
 #[test]
 fn smooth_shells_for_non_isometric_shapes_matches_two_builds() {
-    let options = fmaps::pipeline::RefineOptions {
-        non_isometric: true,
-        ..Default::default()
-    };
+    let mut options = fmaps::pipeline::RefineOptions::default();
+    options.non_isometric = true;
     let refine =
         fmaps::pipeline::named_refinement(fmaps::pipeline::RefinerKind::SmoothShells, &options)
             .unwrap();
@@ -118,10 +112,8 @@ fn the_default_pipeline_does_not_depend_on_the_number_of_threads() {
     let b = body
         .shape(&Build::random(4), &BodyPose::walking(), 0.065, 2)
         .unwrap();
-    let params = MatchParams {
-        refine: Refinement::recommended(),
-        ..MatchParams::default()
-    };
+    let mut params = MatchParams::unrefined();
+    params.refinement = Refinement::recommended();
     let on = |threads: usize| {
         let pool = rayon::ThreadPoolBuilder::new()
             .num_threads(threads)

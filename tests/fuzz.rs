@@ -1,11 +1,10 @@
-//! The option syntaxes of `fmaps match` under arbitrary input: the ZoomOut
-//! schedule `START:FINAL:STEP` and the multi-start list `K1,K2,..|none`.
+//! The ZoomOut schedule syntax `START:FINAL:STEP` under arbitrary input
+//! (the multi-start list `K1,K2,..|none` is fuzzed with the command line).
 //! Never a panic; accepted exactly when the grammar says; printing and
 //! parsing again gives the same value. (The file parsers are fuzzed in
 //! `fmaps-mesh-io`'s `proptest` test; `cargo xtask fuzz` runs both with
 //! 10,000 cases each, `FMAPS_FUZZ_CASES`.)
 
-use fmaps::pipeline::parse_starts;
 use fmaps::refine::ZoomOut;
 use proptest::prelude::*;
 
@@ -64,28 +63,4 @@ proptest! {
         prop_assert_eq!(z.schedule(), vec![a + 7]);
     }
 
-    #[test]
-    fn starts_parse_exactly_the_grammar(text in "[0-9, a-z]{0,20}|none| none |[0-9]{1,22}(,[0-9]{1,22}){0,3}") {
-        let expected: Option<Vec<usize>> = if text.trim() == "none" {
-            Some(Vec::new())
-        } else {
-            text.trim()
-                .split(',')
-                .map(|s| {
-                    let s = s.trim();
-                    (!s.is_empty() && s.bytes().all(|b| b.is_ascii_digit()))
-                        .then(|| s.parse::<usize>().ok())
-                        .flatten()
-                        .filter(|&k| k >= 1)
-                })
-                .collect()
-        };
-        prop_assert_eq!(parse_starts(&text).ok(), expected, "{:?}", text);
-    }
-
-    #[test]
-    fn starts_round_trip(ks in prop::collection::vec(1usize..100_000, 1..6)) {
-        let text = ks.iter().map(|k| k.to_string()).collect::<Vec<_>>().join(",");
-        prop_assert_eq!(parse_starts(&text), Ok(ks));
-    }
 }

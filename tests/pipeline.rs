@@ -1,7 +1,8 @@
 //! The matching pipeline on generated shapes with known correspondence.
 
 use fmaps::mesh_io::TriMesh;
-use fmaps::pipeline::{MatchError, MatchParams, Refinement, StartSelection, match_shapes};
+use fmaps::pipeline::{MatchError, MatchParams, Refinement, match_shapes};
+use fmaps::refine::starts::StartSelection;
 use fmaps::shapes::icosphere;
 
 /// An ellipsoid with two off-axis bumps: no symmetry left.
@@ -40,13 +41,12 @@ fn bent(a: &TriMesh, rate: f64) -> TriMesh {
 }
 
 fn small_params() -> MatchParams {
-    MatchParams {
-        k_process: 40,
-        k_descr: 40,
-        n_descr: 40,
-        k: 20,
-        ..MatchParams::default()
-    }
+    let mut p = MatchParams::unrefined();
+    p.k_process = 40;
+    p.descriptors.eigenpairs = 40;
+    p.descriptors.n = 40;
+    p.k = 20;
+    p
 }
 
 #[test]
@@ -83,10 +83,8 @@ fn a_permuted_copy_is_matched_to_the_true_vertices() {
         Refinement::zoomout(10, 40, 5),
         Refinement::Icp(fmaps::refine::Icp::default()),
     ] {
-        let params = MatchParams {
-            refine: refine.clone(),
-            ..small_params()
-        };
+        let mut params = small_params();
+        params.refinement = refine.clone();
         let r = match_shapes(&a, &b, &params).unwrap();
         let refined = (0..n).filter(|&x| r.t_ab[x] == inv[x]).count();
         assert!(refined >= exact, "{refine:?}: {refined} vs {exact}");
@@ -113,11 +111,9 @@ fn orientation_term_is_what_tells_a_shape_from_its_mirror_image() {
     let fb: Vec<[usize; 3]> = f.iter().map(|&[x, y, z]| [x, z, y]).collect();
     let b = TriMesh::new(vb, fb).unwrap();
     let exact = |reversing: bool| {
-        let p = MatchParams {
-            orient_reversing: reversing,
-            w_orient: 10.0,
-            ..small_params()
-        };
+        let mut p = small_params();
+        p.energy.orient_reversing = reversing;
+        p.energy.weights.orient = 10.0;
         let r = match_shapes(&a, &b, &p).unwrap();
         if reversing {
             assert!(r.orientation < -0.9, "orientation {}", r.orientation);
@@ -132,18 +128,14 @@ fn orientation_term_is_what_tells_a_shape_from_its_mirror_image() {
 #[test]
 fn bad_parameters_are_errors() {
     let a = blob();
-    let p = MatchParams {
-        k: 300,
-        ..small_params()
-    };
+    let mut p = small_params();
+    p.k = 300;
     assert!(matches!(
         match_shapes(&a, &a, &p),
         Err(MatchError::InvalidParameter(_))
     ));
-    let p = MatchParams {
-        landmarks: vec![(0, a.n_vertices())],
-        ..small_params()
-    };
+    let mut p = small_params();
+    p.descriptors.landmarks = vec![(0, a.n_vertices())];
     assert!(matches!(
         match_shapes(&a, &a, &p),
         Err(MatchError::InvalidParameter(_))
@@ -158,16 +150,12 @@ fn multi_start_keeps_the_best_oriented_start_and_equals_that_single_run() {
     let v = a.vertices().to_vec();
     let b = bent(&a, 0.1);
     for (reversing, sign) in [(false, 1.0), (true, -1.0)] {
-        let base = MatchParams {
-            refine: Refinement::zoomout(20, 30, 5),
-            orient_reversing: reversing,
-            select: StartSelection::Orientation,
-            ..small_params()
-        };
-        let multi = MatchParams {
-            starts: vec![4, 8, 4],
-            ..base.clone()
-        };
+        let mut base = small_params();
+        base.refinement = Refinement::zoomout(20, 30, 5);
+        base.energy.orient_reversing = reversing;
+        base.starts.select = StartSelection::Orientation;
+        let mut multi = base.clone();
+        multi.starts.sizes = vec![4, 8, 4];
         let r = match_shapes(&a, &b, &multi).unwrap();
         // Duplicates dropped, k first.
         let ks: Vec<usize> = r.starts.iter().map(|s| s.k).collect();
@@ -184,11 +172,9 @@ fn multi_start_keeps_the_best_oriented_start_and_equals_that_single_run() {
         }
         assert_eq!(r.orientation, best.orientation);
         // The same as a single run from the chosen size.
-        let mut single = MatchParams {
-            k: best.k,
-            ..base.clone()
-        };
-        if let Refinement::ZoomOut { zoomout, .. } = &mut single.refine {
+        let mut single = base.clone();
+        single.k = best.k;
+        if let Refinement::ZoomOut { zoomout, .. } = &mut single.refinement {
             zoomout.k_start = zoomout.k_start.min(best.k);
         }
         let s = match_shapes(&a, &b, &single).unwrap();
@@ -197,25 +183,19 @@ fn multi_start_keeps_the_best_oriented_start_and_equals_that_single_run() {
         // restart_below: a bar the first start clears keeps it alone; one
         // no start can clear (scores are at most 1) runs every start.
         let first = r.starts[0].orientation;
-        let lazy = MatchParams {
-            restart_below: Some(sign * first - 1e-9),
-            ..multi.clone()
-        };
+        let mut lazy = multi.clone();
+        lazy.starts.restart_below = Some(sign * first - 1e-9);
         let lazy = match_shapes(&a, &b, &lazy).unwrap();
         assert_eq!(lazy.starts.len(), 1);
         assert_eq!(lazy.orientation, first);
-        let eager = MatchParams {
-            restart_below: Some(1.5),
-            ..multi.clone()
-        };
+        let mut eager = multi.clone();
+        eager.starts.restart_below = Some(1.5);
         let eager = match_shapes(&a, &b, &eager).unwrap();
         assert_eq!(eager.starts.len(), 3);
         assert_eq!(eager.t_ab, r.t_ab);
         // The default selection keeps the start of lowest area distortion.
-        let by_area = MatchParams {
-            select: StartSelection::default(),
-            ..multi.clone()
-        };
+        let mut by_area = multi.clone();
+        by_area.starts.select = StartSelection::default();
         let by_area = match_shapes(&a, &b, &by_area).unwrap();
         let kept = by_area.starts.iter().find(|s| s.chosen).unwrap();
         for s in &by_area.starts {
@@ -234,10 +214,8 @@ fn multi_start_keeps_the_best_oriented_start_and_equals_that_single_run() {
             assert!(err < 0.05, "mean error {err}");
         }
     }
-    let bad = MatchParams {
-        starts: vec![0],
-        ..small_params()
-    };
+    let mut bad = small_params();
+    bad.starts.sizes = vec![0];
     assert!(matches!(
         match_shapes(&a, &a, &bad),
         Err(MatchError::InvalidParameter(_))
@@ -255,15 +233,11 @@ fn multi_start_keeps_the_best_oriented_start_and_equals_that_single_run() {
 fn select_at_keeps_the_best_start_at_the_stop_and_finishes_only_it() {
     let a = blob();
     let b = bent(&a, 0.15);
-    let base = MatchParams {
-        refine: Refinement::zoomout(20, 40, 4),
-        starts: vec![4, 8, 12],
-        ..small_params()
-    };
-    let stopped = MatchParams {
-        select_at: Some(24),
-        ..base.clone()
-    };
+    let mut base = small_params();
+    base.refinement = Refinement::zoomout(20, 40, 4);
+    base.starts.sizes = vec![4, 8, 12];
+    let mut stopped = base.clone();
+    stopped.starts.select_at = Some(24);
     let r = match_shapes(&a, &b, &stopped).unwrap();
     assert_eq!(r.starts.len(), 4);
     let kept = r.starts.iter().find(|s| s.chosen).unwrap();
@@ -272,12 +246,10 @@ fn select_at_keeps_the_best_start_at_the_stop_and_finishes_only_it() {
     }
     assert_eq!(r.c_ba.shape(), (40, 40));
     // The same start without the stop and without the other starts.
-    let mut single = MatchParams {
-        k: kept.k,
-        starts: Vec::new(),
-        ..base.clone()
-    };
-    if let Refinement::ZoomOut { zoomout, .. } = &mut single.refine {
+    let mut single = base.clone();
+    single.k = kept.k;
+    single.starts.sizes = Vec::new();
+    if let Refinement::ZoomOut { zoomout, .. } = &mut single.refinement {
         zoomout.k_start = zoomout.k_start.min(kept.k);
     }
     let s = match_shapes(&a, &b, &single).unwrap();
@@ -291,10 +263,8 @@ fn select_at_keeps_the_best_start_at_the_stop_and_finishes_only_it() {
     // One extra search: the stopped run's conversion at the stop.
     assert_eq!(rr.nn_searches, sr.nn_searches + 1);
     // A stop at or past the final size changes nothing.
-    let late = MatchParams {
-        select_at: Some(40),
-        ..base.clone()
-    };
+    let mut late = base.clone();
+    late.starts.select_at = Some(40);
     let full = match_shapes(&a, &b, &base).unwrap();
     assert_eq!(match_shapes(&a, &b, &late).unwrap().t_ab, full.t_ab);
 }
@@ -310,14 +280,12 @@ fn select_at_keeps_the_best_start_at_the_stop_and_finishes_only_it() {
 fn the_map_does_not_depend_on_the_units() {
     let pair = fmaps::shapes::creature_pair(3);
     let (a, b) = (&pair.source, &pair.target);
-    let params = MatchParams {
-        k_process: 60,
-        k_descr: 60,
-        n_descr: 40,
-        k: 20,
-        refine: Refinement::zoomout(20, 50, 5),
-        ..MatchParams::default()
-    };
+    let mut params = MatchParams::unrefined();
+    params.k_process = 60;
+    params.descriptors.eigenpairs = 60;
+    params.descriptors.n = 40;
+    params.k = 20;
+    params.refinement = Refinement::zoomout(20, 50, 5);
     let base = match_shapes(a, b, &params).unwrap();
     let n = base.t_ab.len();
     let exact = (0..n).filter(|&x| base.t_ab[x] == pair.truth[x]).count();
@@ -334,10 +302,8 @@ fn the_map_does_not_depend_on_the_units() {
         }
     }
     // The normalization is what makes it so.
-    let raw = MatchParams {
-        area_normalize: false,
-        ..params
-    };
+    let mut raw = params;
+    raw.area_normalize = false;
     let r = match_shapes(a, &b.scaled(1e3).unwrap(), &raw).unwrap();
     let same = (0..n).filter(|&v| r.t_ab[v] == base.t_ab[v]).count();
     assert!(
@@ -353,12 +319,10 @@ fn the_map_does_not_depend_on_the_units() {
 #[test]
 fn an_undetermined_map_is_an_error() {
     let (a, s) = (blob(), icosphere(1.0, 3));
-    let p = MatchParams {
-        k: 10,
-        k_process: 20,
-        k_descr: 20,
-        ..MatchParams::default()
-    };
+    let mut p = MatchParams::unrefined();
+    p.k = 10;
+    p.k_process = 20;
+    p.descriptors.eigenpairs = 20;
     for (x, y) in [(&a, &s), (&s, &a)] {
         match match_shapes(x, y, &p) {
             Err(MatchError::Undetermined {
@@ -383,13 +347,11 @@ fn an_undetermined_map_is_an_error() {
 fn refining_a_given_map() {
     use fmaps::pipeline::{prepare, refine_point_map};
     let pair = fmaps::shapes::creature_pair(3);
-    let params = MatchParams {
-        k: 30,
-        k_process: 60,
-        k_descr: 60,
-        refine: Refinement::zoomout(30, 60, 5),
-        ..MatchParams::default()
-    };
+    let mut params = MatchParams::unrefined();
+    params.k = 30;
+    params.k_process = 60;
+    params.descriptors.eigenpairs = 60;
+    params.refinement = Refinement::zoomout(30, 60, 5);
     let pa = prepare(&pair.source, &params).unwrap();
     let pb = prepare(&pair.target, &params).unwrap();
     let n = pair.truth.len();
@@ -415,10 +377,8 @@ fn refining_a_given_map() {
     let after = wrong(&r.t_ab);
     assert!(after * 5 < before, "{before} wrong before, {after} after");
     // No refinement: the given map back, with its pull-back.
-    let none = MatchParams {
-        refine: Refinement::None,
-        ..params.clone()
-    };
+    let mut none = params.clone();
+    none.refinement = Refinement::None;
     let r = refine_point_map(&pa, &pb, &noisy, &none).unwrap();
     assert_eq!(r.t_ab, noisy);
     assert_eq!(r.c_ba.shape(), (30, 30));
@@ -440,15 +400,13 @@ fn multi_start_with_a_discrete_refiner() {
         step: 5,
         ..fmaps::refine::DiscreteOp::preset("bijective-zoomout").unwrap()
     };
-    let params = MatchParams {
-        k: 20,
-        k_process: 40,
-        k_descr: 40,
-        n_descr: 40,
-        refine: Refinement::Custom(Arc::new(d)),
-        starts: vec![10],
-        ..MatchParams::default()
-    };
+    let mut params = MatchParams::unrefined();
+    params.k = 20;
+    params.k_process = 40;
+    params.descriptors.eigenpairs = 40;
+    params.descriptors.n = 40;
+    params.refinement = Refinement::Custom(Arc::new(d));
+    params.starts.sizes = vec![10];
     let r = match_shapes(&pair.source, &pair.target, &params).unwrap();
     assert_eq!(r.starts.len(), 2);
     assert_eq!(r.starts.iter().filter(|s| s.chosen).count(), 1);
@@ -484,15 +442,13 @@ fn sampled_zoomout_maps_are_exact_conversions() {
     let b = bent(&a, 0.15);
     let mut zoomout = fmaps::refine::ZoomOut::default();
     (zoomout.k_start, zoomout.k_final, zoomout.step) = (20, 40, 4);
-    let sampled = MatchParams {
-        refine: Refinement::ZoomOut {
-            zoomout,
-            samples: Some(600),
-        },
-        starts: vec![8, 12],
-        select_at: Some(28),
-        ..small_params()
+    let mut sampled = small_params();
+    sampled.refinement = Refinement::ZoomOut {
+        zoomout,
+        samples: Some(600),
     };
+    sampled.starts.sizes = vec![8, 12];
+    sampled.starts.select_at = Some(28);
     let r = match_shapes(&a, &b, &sampled).unwrap();
     let rep = r.refine.as_ref().unwrap();
     assert!(
@@ -503,13 +459,11 @@ fn sampled_zoomout_maps_are_exact_conversions() {
     let kept = r.starts.iter().find(|s| s.chosen).unwrap();
     // The initial map of the kept start: the fit does not depend on the
     // refinement.
-    let plain = MatchParams {
-        k: kept.k,
-        refine: Refinement::None,
-        starts: Vec::new(),
-        select_at: None,
-        ..sampled.clone()
-    };
+    let mut plain = sampled.clone();
+    plain.k = kept.k;
+    plain.refinement = Refinement::None;
+    plain.starts.sizes = Vec::new();
+    plain.starts.select_at = None;
     assert_eq!(r.t_ab_init, match_shapes(&a, &b, &plain).unwrap().t_ab_init);
     let (pa, pb) = (
         fmaps::pipeline::prepare(&a, &sampled).unwrap(),

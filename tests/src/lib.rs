@@ -23,3 +23,9 @@ pub fn data_dir(probe: &str) -> Option<PathBuf> {
         .unwrap_or_else(|| workspace_root().join("../shared/datasets"));
     dir.join(probe).exists().then_some(dir)
 }
+
+/// The repository README's Rust example, compiled as a doctest (it reads
+/// files a user downloads, so it is built, not run).
+#[cfg(doctest)]
+#[doc = include_str!("../../README.md")]
+struct RepositoryReadme;

@@ -45,7 +45,7 @@ pub fn bench_match(args: &Args) -> anyhow::Result<()> {
             let t = Instant::now();
             let (ma, mb) = (c.read_mesh(&a)?, c.read_mesh(&b)?);
             let load = t.elapsed().as_secs_f64();
-            let p = MatchParams::default();
+            let p = MatchParams::unrefined();
             let t = Instant::now();
             // Side by side, as `fmaps match` does.
             let (pa, pb) = rayon::join(|| prepare(&ma, &p), || prepare(&mb, &p));
@@ -81,16 +81,14 @@ pub fn bench_match(args: &Args) -> anyhow::Result<()> {
             let secs = pool.install(|| -> anyhow::Result<f64> {
                 let t = Instant::now();
                 let (ma, mb) = (c.read_mesh(&a)?, c.read_mesh(&b)?);
-                let mut p = MatchParams {
-                    refine: Refinement::ZoomOut {
-                        zoomout: ZoomOut::default(),
-                        samples: None,
-                    },
-                    ..MatchParams::default()
+                let mut p = MatchParams::unrefined();
+                p.refinement = Refinement::ZoomOut {
+                    zoomout: ZoomOut::default(),
+                    samples: None,
                 };
                 if needed {
                     p.k_process = p.k_process_needed();
-                    p.k_descr = p.k_descr.min(p.k_process);
+                    p.descriptors.eigenpairs = p.descriptors.eigenpairs.min(p.k_process);
                 }
                 let (pa, pb) = rayon::join(|| prepare(&ma, &p), || prepare(&mb, &p));
                 let r = match_prepared(&pa?, &pb?, &p)?;
@@ -105,12 +103,10 @@ pub fn bench_match(args: &Args) -> anyhow::Result<()> {
         }
     }
     let k_needed = {
-        let p = MatchParams {
-            refine: Refinement::ZoomOut {
-                zoomout: ZoomOut::default(),
-                samples: None,
-            },
-            ..MatchParams::default()
+        let mut p = MatchParams::unrefined();
+        p.refinement = Refinement::ZoomOut {
+            zoomout: ZoomOut::default(),
+            samples: None,
         };
         p.k_process_needed()
     };

@@ -86,7 +86,7 @@ fn large(args: &Args, c: &Collection, a: &str, b: &str) -> anyhow::Result<()> {
         .build()?;
     let ma = subdivide(&subdivide(&c.read_mesh(a)?));
     let mb = subdivide(&subdivide(&c.read_mesh(b)?));
-    let params = MatchParams::default();
+    let params = MatchParams::unrefined();
     let t = Instant::now();
     let (pa, pb) = pool.install(|| rayon::join(|| prepare(&ma, &params), || prepare(&mb, &params)));
     let (pa, pb) = (pa?, pb?);
@@ -196,7 +196,7 @@ pub fn bench_refine(args: &Args) -> anyhow::Result<()> {
     let work = root().join("target/bench/refine");
     std::fs::create_dir_all(&work)?;
     let (ma, mb) = (c.read_mesh(&a)?, c.read_mesh(&b)?);
-    let params = MatchParams::default();
+    let params = MatchParams::unrefined();
     let (pa, pb) = pool.install(|| rayon::join(|| prepare(&ma, &params), || prepare(&mb, &params)));
     let (pa, pb) = (pa?, pb?);
     let init = pool.install(|| match_prepared(&pa, &pb, &params))?;

@@ -110,14 +110,14 @@ impl MapSource {
         if sinkhorn {
             match &mut source {
                 MapSource::Pipeline(cache) | MapSource::Refined { cache, .. } => {
-                    cache.params.refine = with_sinkhorn(&cache.params.refine, method)?;
+                    cache.params.refinement = with_sinkhorn(&cache.params.refinement, method)?;
                 }
                 _ => bail!("+sinkhorn applies to fmaps pipeline methods and REFINER@PUBLISHED"),
             }
         }
         if no_stop {
             match &mut source {
-                MapSource::Pipeline(cache) => cache.params.select_at = None,
+                MapSource::Pipeline(cache) => cache.params.starts.select_at = None,
                 _ => bail!("+no-stop applies to fmaps pipeline methods"),
             }
         }
@@ -132,13 +132,11 @@ impl MapSource {
         if let Some((refine, starts, restart_below)) = pipeline_method(method)? {
             // As `fmaps match`: the stop of the starts, and the eigenpairs
             // the pipeline uses.
-            let mut params = fmaps::MatchParams {
-                select_at: fmaps::pipeline::default_select_at(&refine),
-                refine,
-                starts,
-                restart_below,
-                ..fmaps::MatchParams::default()
-            };
+            let mut params = fmaps::MatchParams::default();
+            params.starts.select_at = fmaps::pipeline::default_select_at(&refine);
+            params.refinement = refine;
+            params.starts.sizes = starts;
+            params.starts.restart_below = restart_below;
             params.k_process = params.k_process_needed();
             return Ok(MapSource::Pipeline(Box::new(PipelineCache {
                 params,
@@ -153,17 +151,15 @@ impl MapSource {
                 fmaps::pipeline::Refinement::ZoomOut { zoomout, .. } => zoomout.k_start,
                 _ => fmaps::MatchParams::default().k,
             };
-            let k_process = k.max(refine.k_needed());
+            let mut params = fmaps::MatchParams::default();
+            params.k = k;
+            params.k_process = k.max(refine.k_needed());
+            params.descriptors.eigenpairs = params.descriptors.eigenpairs.min(params.k_process);
+            params.refinement = refine;
             return Ok(MapSource::Refined {
                 published: c.published_maps(published)?,
                 cache: Box::new(PipelineCache {
-                    params: fmaps::MatchParams {
-                        k,
-                        k_process,
-                        k_descr: fmaps::MatchParams::default().k_descr.min(k_process),
-                        refine,
-                        ..fmaps::MatchParams::default()
-                    },
+                    params,
                     shapes: HashMap::new(),
                 }),
             });
@@ -250,8 +246,8 @@ impl MapSource {
 /// `fmaps-zoomout:START:FINAL:STEP`; any of them with `@K1,K2,..` appended
 /// adds starts at those initial sizes ([`fmaps::MatchParams::starts`]),
 /// and `@K1,K2<SCORE` tries them only when the first map's orientation
-/// score is below SCORE ([`fmaps::MatchParams::restart_below`]). The
-/// ZoomOut methods start from [`fmaps::pipeline::ZOOMOUT_STARTS`] as
+/// score is below SCORE ([`fmaps::pipeline::Starts::restart_below`]). The
+/// ZoomOut methods start from [`fmaps::pipeline::default_starts`] as
 /// well unless told otherwise, as `fmaps match` does; `@none`: one start.
 fn pipeline_method(method: &str) -> anyhow::Result<Option<PipelineMethod>> {
     use fmaps::pipeline::Refinement;
@@ -277,9 +273,11 @@ fn pipeline_method(method: &str) -> anyhow::Result<Option<PipelineMethod>> {
             };
             (m, starts, below)
         }
-        _ if method.starts_with("fmaps-zoomout") => {
-            (method, fmaps::pipeline::ZOOMOUT_STARTS.to_vec(), None)
-        }
+        _ if method.starts_with("fmaps-zoomout") => (
+            method,
+            fmaps::pipeline::default_starts(fmaps::pipeline::RefinerKind::Zoomout, usize::MAX),
+            None,
+        ),
         _ => (method, Vec::new(), None),
     };
     Ok(Some((

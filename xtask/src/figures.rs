@@ -151,7 +151,7 @@ pub fn figures(args: &Args) -> anyhow::Result<()> {
         .context("no FAUST pairs")?;
     let (ma, mb) = (c.read_mesh(&a)?, c.read_mesh(&b)?);
     let (t_ab, _) = full_truth(&c, &a, &b, &ma)?;
-    let p = fmaps::MatchParams::default();
+    let p = fmaps::MatchParams::unrefined();
     let pa = fmaps::pipeline::prepare(&ma, &p)?;
     let pb = fmaps::pipeline::prepare(&mb, &p)?;
     let k = 100;

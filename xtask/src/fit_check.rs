@@ -10,7 +10,7 @@ use std::process::Command;
 use std::time::Instant;
 
 use anyhow::bail;
-use fmaps::pipeline::{MatchParams, energy_params};
+use fmaps::pipeline::MatchParams;
 use fmaps::solve::normalize_weights;
 use fmaps::solve::{ShapeData, build_energy};
 use nalgebra::{DMatrix, DVector};
@@ -99,11 +99,9 @@ pub fn fit_check(args: &Args) -> anyhow::Result<()> {
         let (phi1, ev1, m1, d1) = load(1)?;
         let (phi2, ev2, m2, d2) = load(2)?;
         let c_pyfm = matrix(&out.join("fm.npy"))?;
-        let params = MatchParams {
-            k: args.k,
-            w_orient: args.w_orient,
-            ..MatchParams::default()
-        };
+        let mut params = MatchParams::unrefined();
+        params.k = args.k;
+        params.energy.weights.orient = args.w_orient;
         let src = ShapeData {
             faces: mb.faces(),
             phi: &phi1,
@@ -119,8 +117,8 @@ pub fn fit_check(args: &Args) -> anyhow::Result<()> {
             area: m2.sum(),
         };
         let t = Instant::now();
-        let mut energy = build_energy(&src, &tgt, &d1, &d2, &energy_params(&params))?;
-        normalize_weights(&mut energy, params.weights());
+        let mut energy = build_energy(&src, &tgt, &d1, &d2, &params.energy)?;
+        normalize_weights(&mut energy, params.energy.weights);
         let c_ours = energy.minimize()?;
         let secs = t.elapsed().as_secs_f64();
         // pyFM's energy is ½ Σ w_i term_i; ours Σ w_i term_i.

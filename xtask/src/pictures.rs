@@ -104,23 +104,15 @@ pub fn pictures(args: &Args) -> anyhow::Result<()> {
         // The eval methods of the same names: fmaps-init is the default
         // pipeline without refinement, fmaps-zoomout ZoomOut 50:150:5 from
         // the default starts.
-        let params = MatchParams {
-            refine: Refinement::default_zoomout(),
-            starts: fmaps::pipeline::ZOOMOUT_STARTS.to_vec(),
-            ..MatchParams::default()
-        };
+        let mut params = MatchParams::unrefined();
+        params.refinement = Refinement::default_zoomout();
+        params.starts.sizes =
+            fmaps::pipeline::default_starts(fmaps::pipeline::RefinerKind::Zoomout, usize::MAX);
         let (pa, pb) = (prepare(&ma, &params)?, prepare(&mb, &params)?);
         let r = match_prepared(&pa, &pb, &params)?;
-        let r_init = match_prepared(&pa, &pb, &MatchParams::default())?;
+        let r_init = match_prepared(&pa, &pb, &MatchParams::unrefined())?;
         // `fmaps match` without flags (fmaps-smooth-shells in the tables).
-        let r_def = match_prepared(
-            &pa,
-            &pb,
-            &MatchParams {
-                refine: Refinement::recommended(),
-                ..MatchParams::default()
-            },
-        )?;
+        let r_def = match_prepared(&pa, &pb, &MatchParams::default())?;
         let gt = c.ground_truth(&a, &b, ma.n_vertices(), mb.n_vertices())?;
         let gt_source = fmaps::mesh_io::read_vts(c.vts_path(&a, false))?;
         let solver = ExactSolver::new(&mb)?;

@@ -5,7 +5,7 @@
 //! without ground truth (orientation, coverage, collapsed faces, area and
 //! conformal distortion). The table shows the mean error of each selection
 //! rule next to the best start per pair (the oracle), and the measurement
-//! behind `fmaps::pipeline::ZOOMOUT_STARTS` and `StartSelection`.
+//! behind `fmaps::pipeline::default_starts` and `StartSelection`.
 
 use std::path::PathBuf;
 
@@ -52,10 +52,8 @@ struct Run {
 pub fn starts(args: &Args) -> anyhow::Result<()> {
     let bcicp = bcicp_dir(args.data.as_deref())?;
     let (c, pairs) = crate::eval::collection_pairs(&bcicp, &args.collection)?;
-    let params = MatchParams {
-        refine: Refinement::default_zoomout(),
-        ..MatchParams::default()
-    };
+    let mut params = MatchParams::unrefined();
+    params.refinement = Refinement::default_zoomout();
     let mut all: Vec<Vec<Run>> = Vec::new();
     for (a, b) in pairs.iter().step_by(args.stride.max(1)).take(args.pairs) {
         let (ma, mb) = (c.read_mesh(a)?, c.read_mesh(b)?);
@@ -69,7 +67,7 @@ pub fn starts(args: &Args) -> anyhow::Result<()> {
         for &k in &args.sizes {
             let mut p = params.clone();
             p.k = k;
-            if let Refinement::ZoomOut { zoomout, .. } = &mut p.refine {
+            if let Refinement::ZoomOut { zoomout, .. } = &mut p.refinement {
                 zoomout.k_start = zoomout.k_start.min(k);
             }
             let r = match_prepared(&pa, &pb, &p).with_context(|| format!("{a} -> {b}, k = {k}"))?;

@@ -75,5 +75,18 @@ pub fn fuzz(args: &FuzzArgs) -> anyhow::Result<()> {
     ] {
         cargo(&["test", "--release", "-p", package, "--test", test], &env)?;
     }
+    // The multi-start list's grammar, with the command line that parses it.
+    cargo(
+        &[
+            "test",
+            "--release",
+            "-p",
+            "fmaps-cli",
+            "--bin",
+            "fmaps",
+            "starts_",
+        ],
+        &env,
+    )?;
     Ok(())
 }

@@ -47,10 +47,8 @@ pub(crate) fn run(out_dir: &Path, subdivisions: u32, as_json: bool) -> Result<()
     let t0 = Instant::now();
     let spinner = crate::Spinner::new("generating the built-in pairs");
     let cases = cases(subdivisions)?;
-    let params = MatchParams {
-        refine: Refinement::recommended(),
-        ..MatchParams::default()
-    };
+    let mut params = MatchParams::unrefined();
+    params.refinement = Refinement::recommended();
     std::fs::create_dir_all(out_dir)
         .map_err(|e| runtime(anyhow::anyhow!("{}: {e}", out_dir.display())))?;
     // Every picture is staged and all are renamed into place at the end:

@@ -4,6 +4,7 @@ use super::*;
 
 use fmaps::pipeline::MatchParams;
 use fmaps::refine::Icp;
+use fmaps::refine::starts::StartSelection;
 
 /// The library's defaults, which the flags show and use.
 fn defaults() -> MatchParams {
@@ -31,17 +32,17 @@ pub(crate) struct MatchArgs {
     #[arg(long)]
     k_process: Option<usize>,
     /// Descriptor family.
-    #[arg(long, default_value_t = defaults().descriptor)]
+    #[arg(long, default_value_t = defaults().descriptors.kind)]
     descriptor: fmaps::pipeline::DescriptorKind,
     /// Descriptor samples (WKS energies or HKS times).
-    #[arg(long, default_value_t = defaults().n_descr)]
+    #[arg(long, default_value_t = defaults().descriptors.n)]
     n_descr: usize,
     /// Landmark file: one pair `a b` of 1-based vertex indices (source,
     /// target) per line, or one index used on both shapes.
     #[arg(long)]
     landmarks: Option<PathBuf>,
     /// Relative weight of the orientation-preserving term (0 = off).
-    #[arg(long, default_value_t = defaults().w_orient)]
+    #[arg(long, default_value_t = defaults().energy.weights.orient)]
     w_orient: f64,
     /// Refinement of the initial map. Default: smooth-shells (the most
     /// accurate here, near-isometric and non-isometric; docs/benchmarks.md),
@@ -192,7 +193,7 @@ impl RefinerFlags {
             Some(SamplesFlag::All) => (None, false),
             Some(SamplesFlag::Count(n)) => (Some(n), false),
             None => {
-                let auto = fmaps::pipeline::default_refine_samples(n_a, n_b);
+                let auto = fmaps::pipeline::RefineSampling::default().samples_for(n_a, n_b);
                 (auto, auto.is_some())
             }
         }
@@ -208,17 +209,17 @@ impl RefinerFlags {
         non_isometric: bool,
         (n_a, n_b): (usize, usize),
     ) -> fmaps::pipeline::RefineOptions {
-        fmaps::pipeline::RefineOptions {
-            k,
-            schedule: self.zoomout.clone(),
-            icp_iterations: self.icp_iterations,
-            samples: self.samples(n_a, n_b).0,
-            bijective: self.bijective,
-            adjoint: self.adjoint,
-            sinkhorn: self.conversion == ConversionKind::Sinkhorn,
-            mirrored,
-            non_isometric,
-        }
+        let mut o = fmaps::pipeline::RefineOptions::default();
+        o.k = k;
+        o.schedule = self.zoomout.clone();
+        o.icp_iterations = self.icp_iterations;
+        o.samples = self.samples(n_a, n_b).0;
+        o.bijective = self.bijective;
+        o.adjoint = self.adjoint;
+        o.sinkhorn = self.conversion == ConversionKind::Sinkhorn;
+        o.mirrored = mirrored;
+        o.non_isometric = non_isometric;
+        o
     }
 }
 
@@ -235,13 +236,13 @@ pub(crate) fn read_landmarks(path: &Path) -> Result<mesh_io::Landmarks, Failure>
     mesh_io::read_landmarks(path).map_err(input)
 }
 
-/// The refinement asked for on the command line (its kind and the
-/// facade's refinement); without refinement flags the facade's default
-/// for meshes of `n_a` and `n_b` vertices.
+/// The refinement asked for on the command line: its kind (without
+/// refinement flags the facade's default for meshes of `n_a` and `n_b`
+/// vertices) and the options it is built from.
 fn refinement(
     args: &MatchArgs,
     (n_a, n_b): (usize, usize),
-) -> Result<(fmaps::pipeline::RefinerKind, fmaps::pipeline::Refinement), Failure> {
+) -> (fmaps::pipeline::RefinerKind, fmaps::pipeline::RefineOptions) {
     use fmaps::pipeline::RefinerKind;
     let kind = match (args.refine, &args.refiner.zoomout) {
         (Some(k), _) => k,
@@ -251,8 +252,7 @@ fn refinement(
     let options = args
         .refiner
         .options(args.k, args.mirrored, args.non_isometric, (n_a, n_b));
-    let r = fmaps::pipeline::named_refinement(kind, &options).map_err(zoomout_failure)?;
-    Ok((kind, r))
+    (kind, options)
 }
 
 /// A refinement the options do not allow: bad input about --zoomout.
@@ -266,43 +266,39 @@ pub(crate) fn zoomout_failure(e: fmaps::pipeline::MatchError) -> Failure {
 pub(crate) fn params_of(args: &MatchArgs, sizes: (usize, usize)) -> Result<MatchParams, Failure> {
     // Before the refinement is known: the given value, or the library's
     // default (then lowered to what the pipeline uses, below).
-    let k_process = args.k_process.unwrap_or(defaults().k_process);
-    let mut params = MatchParams {
-        k: args.k,
-        k_process,
-        k_descr: defaults().k_descr.min(k_process),
-        descriptor: args.descriptor,
-        n_descr: args.n_descr,
-        w_orient: args.w_orient,
-        ..MatchParams::default()
-    };
+    let mut params = MatchParams::for_meshes(sizes.0, sizes.1);
+    params.k_process = args.k_process.unwrap_or(defaults().k_process);
+    params.k = args.k;
+    let d = &mut params.descriptors;
+    d.eigenpairs = d.eigenpairs.min(params.k_process);
+    d.kind = args.descriptor;
+    d.n = args.n_descr;
     if let Some(p) = &args.landmarks {
-        params.landmarks = read_landmarks(p)?.pairs;
+        d.landmarks = read_landmarks(p)?.pairs;
     }
+    params.energy.weights.orient = args.w_orient;
+    params.energy.orient_reversing = args.mirrored;
     params.adjoint = args.refiner.adjoint;
-    params.orient_reversing = args.mirrored;
     params.area_normalize = !args.no_area_normalize;
-    let (kind, refine) = refinement(args, sizes)?;
-    params.refine = refine;
-    params.starts = match args.starts.as_deref() {
-        Some(text) => fmaps::pipeline::parse_starts(text)
-            .map_err(|e| input(anyhow::anyhow!("--starts {e}")))?,
-        // The default further starts, those the computed basis allows.
-        None => {
-            fmaps::pipeline::default_starts(kind, params.k_process.max(params.refine.k_needed()))
-        }
-    };
-    if args.restart_below.is_some() && params.starts.is_empty() {
+    let (kind, options) = refinement(args, sizes);
+    params
+        .set_refinement(kind, &options)
+        .map_err(zoomout_failure)?;
+    if let Some(text) = args.starts.as_deref() {
+        params.starts.sizes =
+            parse_starts(text).map_err(|e| input(anyhow::anyhow!("--starts {e}")))?;
+    }
+    if args.restart_below.is_some() && params.starts.sizes.is_empty() {
         return Err(input(anyhow::anyhow!(
             "--restart-below needs further starts (--starts K1,K2, or --refine zoomout)"
         )));
     }
-    params.restart_below = args.restart_below;
-    params.select_at = match args.select_at.as_deref() {
-        None => fmaps::pipeline::default_select_at(&params.refine),
-        Some("none") => None,
+    params.starts.restart_below = args.restart_below;
+    match args.select_at.as_deref() {
+        None => {}
+        Some("none") => params.starts.select_at = None,
         Some(text) => match text.parse::<usize>() {
-            Ok(k) if k > 0 => Some(k),
+            Ok(k) if k > 0 => params.starts.select_at = Some(k),
             _ => {
                 return Err(input(anyhow::anyhow!(
                     "--select-at '{text}': expected a size K >= 1 or none"
@@ -310,16 +306,33 @@ pub(crate) fn params_of(args: &MatchArgs, sizes: (usize, usize)) -> Result<Match
             }
         },
     };
-    params.select = match args.select {
-        SelectKind::Conformal => fmaps::pipeline::StartSelection::Conformal,
-        SelectKind::Orientation => fmaps::pipeline::StartSelection::Orientation,
-        SelectKind::Area => fmaps::pipeline::StartSelection::Area,
+    params.starts.select = match args.select {
+        SelectKind::Conformal => StartSelection::Conformal,
+        SelectKind::Orientation => StartSelection::Orientation,
+        SelectKind::Area => StartSelection::Area,
     };
     params.k_process = match args.k_process {
-        Some(k) => k.max(params.refine.k_needed()),
+        Some(k) => k.max(params.refinement.k_needed()),
         None => params.k_process_needed(),
     };
     Ok(params)
+}
+
+/// Parses `--starts`: `none` (a single start) or sizes `K1,K2,..` (each at
+/// least 1; spaces around commas allowed).
+pub(crate) fn parse_starts(text: &str) -> Result<Vec<usize>, String> {
+    let text = text.trim();
+    if text == "none" {
+        return Ok(Vec::new());
+    }
+    text.split(',')
+        .map(|s| match s.trim().parse::<usize>() {
+            Ok(k) if k >= 1 => Ok(k),
+            _ => Err(format!(
+                "'{text}': expected sizes K1,K2,.. (each at least 1, e.g. 20,30) or none"
+            )),
+        })
+        .collect()
 }
 
 /// A pipeline error as a failure: bad input (exit 2) for parameters the
@@ -394,7 +407,7 @@ pub(crate) fn match_cmd(args: &MatchArgs) -> Result<(), Failure> {
     let total = t.elapsed().as_secs_f64();
     // The sampling ZoomOut ran with, and whether it was chosen from the
     // meshes' sizes.
-    let (samples, auto_samples) = match &params.refine {
+    let (samples, auto_samples) = match &params.refinement {
         fmaps::pipeline::Refinement::ZoomOut { samples, .. } => (
             *samples,
             args.refiner.samples(a.n_vertices(), b.n_vertices()).1,
@@ -493,7 +506,7 @@ pub(crate) fn match_cmd(args: &MatchArgs) -> Result<(), Failure> {
         outln!(
             o,
             "ZoomOut iterations on {m} farthest points per shape, the final map on every vertex: chosen because a mesh has more than {} vertices (--refine-samples all: every vertex)",
-            fmaps::pipeline::AUTO_SAMPLES_ABOVE
+            fmaps::pipeline::RefineSampling::default().above
         );
     }
     outln!(
@@ -538,10 +551,10 @@ pub(crate) fn match_cmd(args: &MatchArgs) -> Result<(), Failure> {
 #[cfg(test)]
 mod tests {
     use clap::Parser;
-    use fmaps::pipeline::{MatchParams, Refinement, ZOOMOUT_STARTS};
+    use fmaps::pipeline::{MatchParams, RefineSampling, Refinement, RefinerKind, default_starts};
     use fmaps::refine::Icp;
 
-    use super::params_of;
+    use super::{params_of, parse_starts};
     use crate::{Cli, Command};
 
     fn parse(extra: &[&str]) -> MatchParams {
@@ -558,21 +571,21 @@ mod tests {
         }
     }
 
-    /// ZoomOut samples above `AUTO_SAMPLES_ABOVE` vertices in the larger
-    /// mesh unless told (`--refine-samples N|all`); other refinements
-    /// never.
+    /// ZoomOut samples above `RefineSampling::above` vertices in the
+    /// larger mesh unless told (`--refine-samples N|all`); other
+    /// refinements never.
     #[test]
     fn zoomout_samples_large_meshes_by_default() {
-        use fmaps::pipeline::{AUTO_REFINE_SAMPLES, AUTO_SAMPLES_ABOVE};
-        let samples = |extra: &[&str], sizes| match parse_sized(extra, sizes).refine {
+        let policy = RefineSampling::default();
+        let samples = |extra: &[&str], sizes| match parse_sized(extra, sizes).refinement {
             Refinement::ZoomOut { samples, .. } => samples,
             other => panic!("{other:?}"),
         };
         let z = ["--refine", "zoomout"];
-        let (small, large) = (AUTO_SAMPLES_ABOVE, AUTO_SAMPLES_ABOVE + 1);
+        let (small, large) = (policy.above, policy.above + 1);
         assert_eq!(samples(&z, (small, small)), None);
-        assert_eq!(samples(&z, (5000, large)), Some(AUTO_REFINE_SAMPLES));
-        assert_eq!(samples(&z, (large, 5000)), Some(AUTO_REFINE_SAMPLES));
+        assert_eq!(samples(&z, (5000, large)), Some(policy.samples));
+        assert_eq!(samples(&z, (large, 5000)), Some(policy.samples));
         let all = ["--refine", "zoomout", "--refine-samples", "all"];
         assert_eq!(samples(&all, (large, large)), None);
         let n = ["--refine", "zoomout", "--refine-samples", "700"];
@@ -583,65 +596,49 @@ mod tests {
         }
     }
 
-    /// `fmaps match` without flags runs the library's defaults, and its
-    /// refinement flags the refiners' defaults: the defaults live once.
+    /// `fmaps match` without flags runs `MatchParams::default()` (on meshes
+    /// large enough for Smooth Shells) and `MatchParams::for_meshes` on
+    /// any meshes, field for field; its refinement flags build the
+    /// refiners' defaults: the defaults live once.
     #[test]
     fn cli_defaults_are_the_library_defaults() {
-        let (p, d) = (parse(&[]), MatchParams::default());
-        assert_eq!(
-            (
-                p.k,
-                p.k_process,
-                p.k_descr,
-                p.n_descr,
-                p.descriptor,
-                p.subsample
-            ),
-            (
-                d.k,
-                d.k_process,
-                d.k_descr,
-                d.n_descr,
-                d.descriptor,
-                d.subsample
-            )
-        );
-        assert_eq!(
-            (p.w_descr, p.w_lap, p.w_dcomm, p.w_orient, p.resolvent_gamma),
-            (d.w_descr, d.w_lap, d.w_dcomm, d.w_orient, d.resolvent_gamma)
-        );
-        assert_eq!(
-            (p.adjoint, p.compress, &p.starts),
-            (d.adjoint, d.compress, &d.starts)
-        );
-        assert_eq!(
-            format!("{:?}", p.refine),
-            format!("{:?}", Refinement::recommended())
+        let same = |p: &MatchParams, d: &MatchParams| {
+            assert_eq!(format!("{p:#?}"), format!("{d:#?}"));
+        };
+        same(&parse(&[]), &MatchParams::default());
+        same(
+            &parse_sized(&[], (100, 5000)),
+            &MatchParams::for_meshes(100, 5000),
         );
         assert!(matches!(
-            parse(&["--refine", "none"]).refine,
+            MatchParams::for_meshes(100, 5000).refinement,
             Refinement::None
         ));
-        match parse(&["--refine", "zoomout"]) {
-            MatchParams {
-                refine:
-                    Refinement::ZoomOut {
-                        zoomout,
-                        samples: None,
-                    },
-                starts,
-                ..
+        // The refiner's Debug shows its parameters: the comparison above
+        // sees them.
+        assert!(format!("{:?}", MatchParams::default().refinement).contains("levels: 50"));
+        assert!(matches!(
+            parse(&["--refine", "none"]).refinement,
+            Refinement::None
+        ));
+        let p = parse(&["--refine", "zoomout"]);
+        match &p.refinement {
+            Refinement::ZoomOut {
+                zoomout,
+                samples: None,
             } => {
                 let z = fmaps::refine::ZoomOut::default();
                 assert_eq!(
                     (zoomout.k_start, zoomout.k_final, zoomout.step),
                     (z.k_start, z.k_final, z.step)
                 );
-                assert_eq!(starts, ZOOMOUT_STARTS.to_vec());
+                assert_eq!(p.starts.sizes, default_starts(RefinerKind::Zoomout, 200));
+                assert_eq!(p.starts.sizes, [8, 20]);
+                assert_eq!(p.starts.select_at, Some(100));
             }
-            other => panic!("{:?}", other.refine),
+            other => panic!("{other:?}"),
         }
-        match parse(&["--refine", "icp"]).refine {
+        match parse(&["--refine", "icp"]).refinement {
             Refinement::Icp(icp) => assert_eq!(icp, Icp::default()),
             other => panic!("{other:?}"),
         }
@@ -662,5 +659,45 @@ mod tests {
         assert_eq!(k(&["--refine", "none", "--starts", "8,170"]), 170);
         assert_eq!(k(&["--refine", "zoomout", "--k-process", "180"]), 180);
         assert_eq!(k(&["--refine", "zoomout", "--k-process", "60"]), 150);
+    }
+
+    #[test]
+    fn starts_parse_as_sizes_or_none() {
+        assert_eq!(parse_starts("20, 30"), Ok(vec![20, 30]));
+        assert_eq!(parse_starts(" none "), Ok(vec![]));
+        for bad in ["20,,30", "0", "-1", "", "a,b", "20;30"] {
+            assert!(parse_starts(bad).is_err(), "{bad:?}");
+        }
+    }
+
+    proptest::proptest! {
+        #![proptest_config(proptest::test_runner::Config::with_cases(
+            std::env::var("FMAPS_FUZZ_CASES").ok().and_then(|s| s.parse().ok()).unwrap_or(256)
+        ))]
+
+    #[test]
+    fn starts_parse_exactly_the_grammar(text in "[0-9, a-z]{0,20}|none| none |[0-9]{1,22}(,[0-9]{1,22}){0,3}") {
+        let expected: Option<Vec<usize>> = if text.trim() == "none" {
+            Some(Vec::new())
+        } else {
+            text.trim()
+                .split(',')
+                .map(|s| {
+                    let s = s.trim();
+                    (!s.is_empty() && s.bytes().all(|b| b.is_ascii_digit()))
+                        .then(|| s.parse::<usize>().ok())
+                        .flatten()
+                        .filter(|&k| k >= 1)
+                })
+                .collect()
+        };
+        proptest::prop_assert_eq!(parse_starts(&text).ok(), expected, "{:?}", text);
+    }
+
+    #[test]
+    fn starts_round_trip(ks in proptest::collection::vec(1usize..100_000, 1..6)) {
+        let text = ks.iter().map(|k| k.to_string()).collect::<Vec<_>>().join(",");
+        proptest::prop_assert_eq!(parse_starts(&text), Ok(ks));
+    }
     }
 }

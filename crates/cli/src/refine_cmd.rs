@@ -70,16 +70,14 @@ pub(crate) fn refine_cmd(args: &RefineArgs) -> Result<(), Failure> {
         )));
     }
     let refine = refinement(args, (a.n_vertices(), b.n_vertices()))?;
-    let mut params = MatchParams {
-        k: args.k,
-        refine,
-        adjoint: args.refiner.adjoint,
-        area_normalize: !args.no_area_normalize,
-        ..MatchParams::default()
-    };
-    params.k_process = args.k.max(params.refine.k_needed());
+    let mut params = MatchParams::unrefined();
+    params.k = args.k;
+    params.refinement = refine;
+    params.adjoint = args.refiner.adjoint;
+    params.area_normalize = !args.no_area_normalize;
+    params.k_process = args.k.max(params.refinement.k_needed());
     // No descriptors are computed; keep their size within the basis.
-    params.k_descr = params.k_descr.min(params.k_process);
+    params.descriptors.eigenpairs = params.descriptors.eigenpairs.min(params.k_process);
     if params.k == 0 {
         return Err(input(anyhow::anyhow!(
             "--k 0: the map needs at least one basis function"

@@ -159,27 +159,19 @@ pub fn main() -> std::result::Result<(), Box<dyn std::error::Error>> {
 
     // The whole pipeline with it, on the built-in pair (known truth).
     let pair = creature_pair(3);
-    let params = MatchParams {
-        k_process: 80,
-        k_descr: 60,
-        k: 30,
-        refine: Refinement::zoomout(30, 80, 5),
-        spectrum: {
-            let mut s = SpectrumParams::default();
-            s.backend = Backend::Custom(Arc::new(backend));
-            s
-        },
-        ..MatchParams::default()
-    };
+    let mut params = MatchParams::default();
+    params.k_process = 80;
+    params.descriptors.eigenpairs = 60;
+    params.k = 30;
+    params.refinement = Refinement::zoomout(30, 80, 5);
+    params.spectrum.backend = Backend::Custom(Arc::new(backend));
     let t = Instant::now();
     let r = match_shapes(&pair.source, &pair.target, &params)?;
     let seconds = t.elapsed().as_secs_f64();
     // The same pipeline with the built-in backend: two independent
     // eigensolvers must give the same map (up to near-ties).
-    let native = MatchParams {
-        spectrum: SpectrumParams::default(),
-        ..params.clone()
-    };
+    let mut native = params.clone();
+    native.spectrum = SpectrumParams::default();
     let r_native = match_shapes(&pair.source, &pair.target, &native)?;
     let exact = r
         .t_ab

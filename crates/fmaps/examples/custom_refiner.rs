@@ -20,6 +20,7 @@ use fmaps::shapes::creature_pair;
 use fmaps::solve::{fmap_from_point_map, point_map_from_fmap};
 
 /// ZoomOut from `k_start` to `k_final` in steps of `step`.
+#[derive(Debug)]
 struct PlainZoomOut {
     k_start: usize,
     k_final: usize,
@@ -104,13 +105,11 @@ pub fn main() -> std::result::Result<(), Box<dyn std::error::Error>> {
     // schedule, on the built-in pair (known truth).
     let pair = creature_pair(3);
     let run = |refine: Refinement| -> std::result::Result<Vec<usize>, Box<dyn std::error::Error>> {
-        let params = MatchParams {
-            k_process: 80,
-            k_descr: 60,
-            k: 20,
-            refine,
-            ..MatchParams::default()
-        };
+        let mut params = MatchParams::default();
+        params.k_process = 80;
+        params.descriptors.eigenpairs = 60;
+        params.k = 20;
+        params.refinement = refine;
         Ok(match_shapes(&pair.source, &pair.target, &params)?.t_ab)
     };
     let custom = run(Refinement::Custom(Arc::new(plain)))?;

@@ -131,6 +131,19 @@ pub enum MeshProblem {
         /// Number of vertices.
         n_vertices: usize,
     },
+    /// Every face has zero area (collinear or repeated vertices only), so
+    /// the mesh cannot be scaled to unit area.
+    #[error("the area is 0: it cannot be normalized (collinear or degenerate faces only?)")]
+    ZeroArea,
+    /// The coordinates are too large or too small for the area of a
+    /// surface to be represented in double precision.
+    #[error(
+        "coordinates of magnitude {extent:e} are beyond double precision's range for a surface"
+    )]
+    ExtentOutOfRange {
+        /// The largest coordinate magnitude.
+        extent: f64,
+    },
 }
 
 impl Error {

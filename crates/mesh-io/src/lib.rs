@@ -178,6 +178,49 @@ impl TriMesh {
         TriMesh::new(v, self.faces.clone())
     }
 
+    /// The mesh scaled to unit area, and the factor every coordinate was
+    /// multiplied by (`1/√area`). The coordinates are first scaled by a
+    /// power of two (exact) to a largest magnitude in [1, 2), so the area
+    /// neither overflows nor underflows for any finite coordinates:
+    /// meshes in units of 1e300 or 1e-300 come out as in metres.
+    ///
+    /// Errors: a mesh of zero area ([`MeshProblem::ZeroArea`]).
+    ///
+    /// ```
+    /// use fmaps_mesh_io::TriMesh;
+    /// // A right triangle of area 2e6 (in millimetres, say).
+    /// let t = TriMesh::new(vec![[0.0; 3], [2000.0, 0.0, 0.0], [0.0, 2000.0, 0.0]], vec![[0, 1, 2]])?;
+    /// let (unit, factor) = t.to_unit_area()?;
+    /// assert!((unit.area() - 1.0).abs() < 1e-15);
+    /// assert!((factor - 1.0 / 2e6f64.sqrt()).abs() < 1e-18);
+    /// # Ok::<(), fmaps_mesh_io::Error>(())
+    /// ```
+    pub fn to_unit_area(&self) -> Result<(TriMesh, f64)> {
+        let invalid = |problem| Error::InvalidMesh {
+            path: None,
+            problem,
+        };
+        let extent = self
+            .vertices
+            .iter()
+            .flatten()
+            .fold(0.0f64, |m, c| m.max(c.abs()));
+        if extent == 0.0 {
+            return Err(invalid(MeshProblem::ZeroArea));
+        }
+        let pre = 2f64.powi(-(extent.log2().floor() as i32));
+        if !pre.is_finite() || pre == 0.0 {
+            return Err(invalid(MeshProblem::ExtentOutOfRange { extent }));
+        }
+        let pre_mesh = self.scaled(pre)?;
+        let area = pre_mesh.area();
+        if !(area.is_finite() && area > 0.0) {
+            return Err(invalid(MeshProblem::ZeroArea));
+        }
+        let s = 1.0 / area.sqrt();
+        Ok((pre_mesh.scaled(s)?, pre * s))
+    }
+
     /// Checks the mesh and returns a report of its combinatorics and defects.
     pub fn validate(&self) -> MeshReport {
         validate::report(self)

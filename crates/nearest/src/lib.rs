@@ -63,10 +63,9 @@
 //! narrower kernels; the answers are the same), and `FMAPS_NO_AMX` turns
 //! the tiles off.
 //!
-//! This crate is also the one place of the workspace where CPU features
-//! are detected ([`cpu_features`]) and where `unsafe` code lives (the AMX
-//! tiles, the strided row view, the `#[target_feature]` kernels, among
-//! them [`wedge_sums`] for `fmaps-solve`).
+//! This crate reports the CPU's features ([`cpu_features`], detected by
+//! `fmaps-simd`) and holds the `unsafe` code of the search (the AMX tiles,
+//! the strided row view, the `#[target_feature]` kernels).
 #![deny(missing_docs)]
 
 mod balls;
@@ -79,7 +78,6 @@ mod prefix;
 mod rows;
 mod tiles;
 mod tree;
-mod wedge;
 
 #[cfg(test)]
 mod tests;
@@ -92,8 +90,8 @@ use std::sync::OnceLock;
 use balls::BallData;
 pub use balls::{Partition, PartitionParams};
 use brute::{BruteData, FUSED_MAX_DIM, brute_search, max_abs, power_of_two_scale, scale_for};
+pub use partition::BallsRequest;
 use partition::TILED_BALLS_FROM_ROWS;
-pub use partition::{cluster_columns, coarse_ball_size};
 use prefix::{PREFIX_FROM, PREFIX_MAX_ROWS, PrefixData, prefix_search};
 use rows::Rows;
 use std::sync::Arc;
@@ -109,7 +107,6 @@ const TREE_MIN_ROWS: usize = 50_000;
 pub use cpu::{CpuFeatures, SimdLevel, cpu_features, set_simd_cap, simd_level};
 pub use image::{CheckedRows, ImageSearch};
 pub use knn::{KNearest, k_nearest_rows};
-pub use wedge::{Fan, wedge_sums};
 
 /// Errors of this crate.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]

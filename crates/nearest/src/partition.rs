@@ -270,164 +270,153 @@ impl Default for PartitionParams {
 
 /// Leading columns of `d` that [`Partition::for_balls`] clusters: half
 /// of them, at least 64 (all of them up to 64).
-pub fn cluster_columns(d: usize) -> usize {
+pub(crate) fn cluster_columns(d: usize) -> usize {
     (d / 2).max(d.min(64))
 }
 
-/// Rows per ball for one search of about `n` queries among `n` rows
-/// without guesses or with weak ones (an initial conversion, the first
-/// full-size search after iterations on samples): about `√(n/5)`, at least
-/// [`PartitionParams::ball_size`]. That balances a query's comparisons
-/// with the n / size centres against the rows of the ~5 balls it opens
-/// (docs/tuning.md: on FAUST's 80k pair, 126 rows per ball make the initial point
-/// map and the final search of a sampled ZoomOut about twice as fast as
-/// 24, the same maps). Searches with the previous iteration's map as
-/// guesses open fewer balls and keep [`PartitionParams::ball_size`]
-/// (larger balls were slower there).
+impl PartitionParams {
+    /// Rows per ball for one search of about `n` queries among `n` rows
+    /// without guesses or with weak ones (an initial conversion, the first
+    /// full-size search after iterations on samples): about `√(n/5)`, at
+    /// least [`ball_size`](Self::ball_size). That balances a query's
+    /// comparisons with the n / size centres against the rows of the ~5
+    /// balls it opens (docs/tuning.md: on FAUST's 80k pair, 126 rows per
+    /// ball make the initial point map and the final search of a sampled
+    /// ZoomOut about twice as fast as 24, the same maps). Searches with the
+    /// previous iteration's map as guesses open fewer balls and keep
+    /// [`ball_size`](Self::ball_size) (larger balls were slower there).
+    ///
+    /// ```
+    /// let p = fmaps_nearest::PartitionParams::default();
+    /// assert_eq!(p.coarse_ball_size(80_000), 126);
+    /// assert_eq!(p.coarse_ball_size(1000), p.ball_size);
+    /// ```
+    pub fn coarse_ball_size(&self, n: usize) -> usize {
+        ((n as f64 / 5.0).sqrt().round() as usize).max(self.ball_size)
+    }
+}
+
+/// What [`Partition::for_balls`] builds: the rows from which the ball
+/// search pays for the caller, and how the clusters are made. Built with
+/// [`BallsRequest::new`] and its modifiers.
 ///
 /// ```
-/// assert_eq!(fmaps_nearest::coarse_ball_size(80_000), 126);
-/// let defaults = fmaps_nearest::PartitionParams::default();
-/// assert_eq!(fmaps_nearest::coarse_ball_size(1000), defaults.ball_size);
+/// use fmaps_nearest::BallsRequest;
+/// let r = BallsRequest::new(1024).kmeans_steps(2);
+/// assert_eq!((r.min_rows, r.kmeans_steps, r.one_search), (1024, 2, false));
 /// ```
-pub fn coarse_ball_size(n: usize) -> usize {
-    ((n as f64 / 5.0).sqrt().round() as usize).max(BALL_SIZE)
+#[derive(Debug, Clone, PartialEq, Eq)]
+#[non_exhaustive]
+pub struct BallsRequest {
+    /// Fewest rows for which the caller's searches gain from the balls
+    /// (below, its other strategies are as fast).
+    pub min_rows: usize,
+    /// Lloyd steps of the k-means: fewer where the clusters serve few
+    /// searches, so that their cost counts (ICP's ten searches at k = 50:
+    /// two steps measured ~4% faster in all, five ~5% faster for
+    /// ZoomOut's 21; any partition gives the same answers).
+    pub kmeans_steps: usize,
+    /// The clusters serve one search of about as many queries as rows
+    /// without guesses (a single conversion): balls of
+    /// [`PartitionParams::coarse_ball_size`] rows instead of
+    /// [`PartitionParams::ball_size`].
+    pub one_search: bool,
+    /// Clusters the caller already has (one label per row, e.g. patches
+    /// of neighbouring vertices), used instead of the k-means.
+    pub labels: Option<Vec<u32>>,
+    /// The caller's other choice is the matrix tiles where the CPU has
+    /// them (the default), so [`PartitionParams::tiled_from_rows`] applies;
+    /// `false` for a caller whose other choice is brute force without the
+    /// tiles ([`NnStrategy::Brute`](crate::NnStrategy::Brute), e.g. Smooth
+    /// Shells' searches among a few thousand samples).
+    pub against_tiles: bool,
+}
+
+impl BallsRequest {
+    /// The default clusters for a caller whose searches gain from the
+    /// balls from `min_rows` rows on.
+    pub fn new(min_rows: usize) -> BallsRequest {
+        BallsRequest {
+            min_rows,
+            kmeans_steps: KMEANS_STEPS,
+            one_search: false,
+            labels: None,
+            against_tiles: true,
+        }
+    }
+
+    /// With `steps` Lloyd steps.
+    pub fn kmeans_steps(mut self, steps: usize) -> BallsRequest {
+        self.kmeans_steps = steps;
+        self
+    }
+
+    /// For one search ([`one_search`](Self::one_search)).
+    pub fn one_search(mut self) -> BallsRequest {
+        self.one_search = true;
+        self
+    }
+
+    /// With the caller's clusters ([`labels`](Self::labels)).
+    pub fn labels(mut self, labels: Vec<u32>) -> BallsRequest {
+        self.labels = Some(labels);
+        self
+    }
+
+    /// Against brute force without the tiles
+    /// ([`against_tiles`](Self::against_tiles) off).
+    pub fn over_brute(mut self) -> BallsRequest {
+        self.against_tiles = false;
+        self
+    }
 }
 
 impl Partition {
-    /// The default clusters for searching the rows `rows` (n x d) or any
-    /// linear image of them with the ball search, when that is the
-    /// fastest exact search: `min_rows..=` [`PartitionParams::max_rows`] rows (below
-    /// `min_rows`, which depends on the caller's searches, the other
-    /// strategies are as fast; on CPUs with matrix tiles,
-    /// [`tiles_available`](crate::tiles_available), at least
-    /// [`PartitionParams::tiled_from_rows`], below which the tiles are), d > 0, and
-    /// `FMAPS_NO_BALLS` unset (`FMAPS_NO_BALLS=1`: `None`, to compare; the
-    /// answers are the same). [`Partition::kmeans`] with [`PartitionParams::ball_size`]
-    /// and [`PartitionParams::kmeans_steps`] of the leading
-    /// [`cluster_columns`]`(d)` columns: on a spectral embedding the
-    /// smoothest eigenfunctions already decide which rows are neighbours,
-    /// and the Lloyd steps cost half as much (FAUST 5k, ZoomOut 50:150:5,
-    /// one thread: ~5% faster than clusters of all 150 columns, the same
-    /// maps; neutral for 30:200:1, whose clusters serve 171 searches).
+    /// The clusters for searching the rows `rows` (n x d) or any linear
+    /// image of them with the ball search, when that is the fastest exact
+    /// search: `request.min_rows..=` [`PartitionParams::max_rows`] rows (on
+    /// CPUs with matrix tiles, [`tiles_available`](crate::tiles_available),
+    /// and [`BallsRequest::against_tiles`], at least
+    /// [`PartitionParams::tiled_from_rows`], below which the tiles are),
+    /// d > 0, labels (if given) one per row, and `FMAPS_NO_BALLS` unset
+    /// (`FMAPS_NO_BALLS=1`: `None`, to compare; the answers are the same).
+    /// Without labels: [`Partition::kmeans`] of the leading half of the
+    /// columns (at least 64): on a spectral embedding the smoothest
+    /// eigenfunctions already decide which rows are neighbours, and the
+    /// Lloyd steps cost half as much (FAUST 5k, ZoomOut 50:150:5, one
+    /// thread: ~5% faster than clusters of all 150 columns, the same maps;
+    /// neutral for 30:200:1, whose clusters serve 171 searches).
     ///
     /// ```
+    /// use fmaps_nearest::{BallsRequest, Partition};
     /// let rows = faer::Mat::<f64>::from_fn(3000, 4, |i, j| ((i * (j + 1)) as f64).sin());
-    /// if let Some(p) = fmaps_nearest::Partition::for_balls(rows.as_ref(), 1024) {
+    /// if let Some(p) = Partition::for_balls(rows.as_ref(), BallsRequest::new(1024)) {
     ///     assert_eq!(p.len(), 3000);
     /// }
-    /// ```
-    pub fn for_balls(rows: MatRef<'_, f64>, min_rows: usize) -> Option<Arc<Partition>> {
-        Partition::for_balls_with_steps(rows, min_rows, KMEANS_STEPS)
-    }
-
-    /// [`for_balls`](Self::for_balls) with `steps` Lloyd steps: fewer
-    /// where the clusters serve few searches, so that their cost counts
-    /// (ICP's ten searches at k = 50: two steps measured ~4% faster in
-    /// all, five ~5% faster for ZoomOut's 21; any partition gives the same
-    /// answers).
-    ///
-    /// ```
-    /// let rows = faer::Mat::<f64>::from_fn(3000, 4, |i, j| ((i * (j + 1)) as f64).sin());
-    /// if let Some(p) = fmaps_nearest::Partition::for_balls_with_steps(rows.as_ref(), 1024, 2) {
-    ///     assert_eq!(p.len(), 3000);
-    /// }
-    /// ```
-    pub fn for_balls_with_steps(
-        rows: MatRef<'_, f64>,
-        min_rows: usize,
-        steps: usize,
-    ) -> Option<Arc<Partition>> {
-        if !Partition::balls_pay(rows.nrows(), rows.ncols(), min_rows) {
-            return None;
-        }
-        Some(Partition::kmeans(
-            rows.subcols(0, cluster_columns(rows.ncols())),
-            BALL_SIZE,
-            steps,
-        ))
-    }
-
-    /// [`for_balls`](Self::for_balls) for one search of about as many
-    /// queries as rows without guesses (a single conversion): clusters of
-    /// [`coarse_ball_size`] rows.
-    ///
-    /// ```
-    /// let rows = faer::Mat::<f64>::from_fn(3000, 4, |i, j| ((i * (j + 1)) as f64).sin());
-    /// if let Some(p) = fmaps_nearest::Partition::for_one_search(rows.as_ref(), 1024) {
-    ///     assert_eq!(p.len(), 3000);
-    /// }
-    /// ```
-    pub fn for_one_search(rows: MatRef<'_, f64>, min_rows: usize) -> Option<Arc<Partition>> {
-        if !Partition::balls_pay(rows.nrows(), rows.ncols(), min_rows) {
-            return None;
-        }
-        Some(Partition::kmeans(
-            rows.subcols(0, cluster_columns(rows.ncols())),
-            coarse_ball_size(rows.nrows()),
-            KMEANS_STEPS,
-        ))
-    }
-
-    /// [`for_balls`](Self::for_balls) with clusters the caller already
-    /// has (`labels`, one per row, e.g. patches of neighbouring vertices):
-    /// `Some` under the same conditions, without the k-means.
-    ///
-    /// ```
-    /// let rows = faer::Mat::<f64>::zeros(3000, 4);
     /// let labels: Vec<u32> = (0..3000).map(|i| i / 20).collect();
-    /// if let Some(p) = fmaps_nearest::Partition::for_balls_from_labels(rows.as_ref(), 1024, labels) {
-    ///     assert_eq!(p.labels()[45], 2);
-    /// }
-    /// ```
-    pub fn for_balls_from_labels(
-        rows: MatRef<'_, f64>,
-        min_rows: usize,
-        labels: Vec<u32>,
-    ) -> Option<Arc<Partition>> {
-        Partition::from_labels_if(rows, min_rows, labels, crate::tiles_available())
-    }
-
-    /// [`for_balls_from_labels`](Self::for_balls_from_labels) for a caller
-    /// whose other choice is brute force without the matrix tiles
-    /// ([`NnStrategy::Brute`](crate::NnStrategy::Brute), e.g. Smooth
-    /// Shells' searches among a few thousand samples): the same conditions
-    /// on any CPU, without the tiles' row threshold
-    /// ([`PartitionParams::tiled_from_rows`]), which compares the balls with the tiles.
-    ///
-    /// ```
-    /// let rows = faer::Mat::<f64>::zeros(3000, 4);
-    /// let labels: Vec<u32> = (0..3000).map(|i| i / 20).collect();
-    /// let p = fmaps_nearest::Partition::for_balls_over_brute_from_labels(rows.as_ref(), 1024, labels);
+    /// let p = Partition::for_balls(rows.as_ref(), BallsRequest::new(1024).labels(labels).over_brute());
     /// if std::env::var_os("FMAPS_NO_BALLS").is_none() {
     ///     assert_eq!(p.expect("3000 rows, from 1024").labels()[45], 2);
     /// }
     /// ```
-    pub fn for_balls_over_brute_from_labels(
-        rows: MatRef<'_, f64>,
-        min_rows: usize,
-        labels: Vec<u32>,
-    ) -> Option<Arc<Partition>> {
-        Partition::from_labels_if(rows, min_rows, labels, false)
-    }
-
-    /// `labels` as a partition under the conditions of
-    /// [`for_balls`](Self::for_balls), `tiles` saying whether the tiles'
-    /// row threshold applies.
-    fn from_labels_if(
-        rows: MatRef<'_, f64>,
-        min_rows: usize,
-        labels: Vec<u32>,
-        tiles: bool,
-    ) -> Option<Arc<Partition>> {
-        (labels.len() == rows.nrows()
-            && Partition::balls_pay_with(rows.nrows(), rows.ncols(), min_rows, tiles))
-        .then(|| Partition::from_labels(labels))
-    }
-
-    /// The conditions of [`for_balls`](Self::for_balls).
-    fn balls_pay(n: usize, d: usize, min_rows: usize) -> bool {
-        Partition::balls_pay_with(n, d, min_rows, crate::tiles_available())
+    pub fn for_balls(rows: MatRef<'_, f64>, request: BallsRequest) -> Option<Arc<Partition>> {
+        let tiles = request.against_tiles && crate::tiles_available();
+        if !Partition::balls_pay_with(rows.nrows(), rows.ncols(), request.min_rows, tiles) {
+            return None;
+        }
+        if let Some(labels) = request.labels {
+            return (labels.len() == rows.nrows()).then(|| Partition::from_labels(labels));
+        }
+        let size = if request.one_search {
+            PartitionParams::default().coarse_ball_size(rows.nrows())
+        } else {
+            BALL_SIZE
+        };
+        Some(Partition::kmeans(
+            rows.subcols(0, cluster_columns(rows.ncols())),
+            size,
+            request.kmeans_steps,
+        ))
     }
 
     /// The conditions of [`for_balls`](Self::for_balls), `tiles` saying
@@ -616,6 +605,15 @@ impl Partition {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Half of the columns, at least 64 (all of them up to 64).
+    #[test]
+    fn clusters_see_half_the_columns_at_least_64() {
+        assert_eq!(
+            [10, 64, 100, 150, 200].map(cluster_columns),
+            [10, 64, 64, 75, 100]
+        );
+    }
 
     /// The k-means objective: squared distances of the rows to their
     /// clusters' means.

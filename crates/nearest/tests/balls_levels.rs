@@ -7,7 +7,7 @@
 //! (`FMAPS_NO_AMX`) before its first search: one test in its own binary.
 
 use fmaps_eigensolve::conformance::grid_basis;
-use fmaps_nearest::{NnParams, NnStrategy, Partition, view};
+use fmaps_nearest::{BallsRequest, NnParams, NnStrategy, Partition, view};
 use nalgebra::DMatrix;
 
 mod common;
@@ -37,7 +37,8 @@ fn partitioned_balls_give_the_naive_answer_at_every_level() {
         for (x, q) in &sets {
             let (n, d) = x.shape();
             let want = naive_nearest(x, q);
-            let partition = Partition::for_balls(view(x), 1).expect("clusters without tiles");
+            let partition = Partition::for_balls(view(x), BallsRequest::new(1))
+                .expect("clusters without tiles");
             let params = NnParams::with_strategy(NnStrategy::Balls).with_partition(partition);
             let shifted: Vec<usize> = want.iter().map(|&t| (t + 5) % n).collect();
             for hint in [None, Some(&want), Some(&shifted)] {

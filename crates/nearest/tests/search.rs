@@ -148,11 +148,11 @@ fn prefix_search_equals_brute_force_whatever_the_guesses() {
 /// none below the caller's row count, for zero columns, where matrix tiles
 /// exist below `PartitionParams::tiled_from_rows` rows, or with `FMAPS_NO_BALLS` set
 /// (not set in this test); otherwise a k-means partition of every row, the
-/// same as `Partition::kmeans` with the default sizes on the leading
-/// `cluster_columns(d)` columns (half of them, at least 64).
+/// same as `Partition::kmeans` with the default sizes on the leading half
+/// of the columns (at least 64; 75 of 150 here).
 #[test]
 fn default_ball_clusters_follow_the_policy() {
-    use fmaps_nearest::{Partition, PartitionParams, tiles_available, view};
+    use fmaps_nearest::{BallsRequest, Partition, PartitionParams, tiles_available, view};
     let PartitionParams {
         ball_size,
         kmeans_steps,
@@ -163,17 +163,12 @@ fn default_ball_clusters_follow_the_policy() {
         eprintln!("note: default_ball_clusters_follow_the_policy: skipped, FMAPS_NO_BALLS is set");
         return;
     }
-    use fmaps_nearest::cluster_columns;
-    assert_eq!(
-        [10, 64, 100, 150, 200].map(cluster_columns),
-        [10, 64, 64, 75, 100]
-    );
     let b = grid_basis(48, 24, 150);
     let rows = b.eigenvectors.columns(0, 150).into_owned();
     let n = rows.nrows();
-    assert!(Partition::for_balls(view(&rows), n + 1).is_none());
-    assert!(Partition::for_balls(view(&rows).subcols(0, 0), 1).is_none());
-    let got = Partition::for_balls(view(&rows), n);
+    assert!(Partition::for_balls(view(&rows), BallsRequest::new(n + 1)).is_none());
+    assert!(Partition::for_balls(view(&rows).subcols(0, 0), BallsRequest::new(1)).is_none());
+    let got = Partition::for_balls(view(&rows), BallsRequest::new(n));
     if tiles_available() {
         eprintln!(
             "note: default_ball_clusters_follow_the_policy: AMX tiles here, so no clusters (the tile search is used); the clustering is checked without tiles"
@@ -199,11 +194,12 @@ fn default_ball_clusters_follow_the_policy() {
         faer::Mat::<f64>::from_fn(n, 3, |i, j| ((i as f64) * 0.001 * (j + 1) as f64).sin())
     };
     let at = big(tiled_from_rows);
-    let got = Partition::for_balls(at.as_ref(), 1).expect("clusters from tiled_from_rows rows");
+    let got = Partition::for_balls(at.as_ref(), BallsRequest::new(1))
+        .expect("clusters from tiled_from_rows rows");
     assert_eq!(got.len(), tiled_from_rows);
     let below = big(tiled_from_rows - 1);
     assert_eq!(
-        Partition::for_balls(below.as_ref(), 1).is_some(),
+        Partition::for_balls(below.as_ref(), BallsRequest::new(1)).is_some(),
         !tiles_available()
     );
 }

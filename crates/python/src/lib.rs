@@ -28,9 +28,7 @@ use std::path::PathBuf;
 use std::sync::Arc;
 
 use fmaps::mesh_io::TriMesh;
-use fmaps::pipeline::{
-    MatchParams, RefineOptions, RefinerKind, default_select_at, default_starts, named_refinement,
-};
+use fmaps::pipeline::{MatchParams, RefineOptions, RefineSampling, RefinerKind};
 use nalgebra::DMatrix;
 use numpy::ndarray::{Array1, Array2, ShapeBuilder};
 use numpy::{IntoPyArray, PyArray1, PyArray2, PyReadonlyArray1, PyReadonlyArray2};
@@ -250,7 +248,7 @@ fn fortran(m: DMatrix<f64>) -> Array2<f64> {
 /// (`START:FINAL:STEP`, None: 50:150:5) where the refiner has one, from the
 /// further starts `fmaps match` uses for that refiner, for meshes of
 /// `n_a` and `n_b` vertices (a ZoomOut samples them as `fmaps match`
-/// does: [`fmaps::pipeline::default_refine_samples`]).
+/// does: [`fmaps::pipeline::RefineSampling`]).
 #[allow(clippy::too_many_arguments)]
 fn params_for(
     refine: &str,
@@ -262,30 +260,23 @@ fn params_for(
     (mirrored, non_isometric): (bool, bool),
     area_normalize: bool,
 ) -> PyResult<MatchParams> {
-    let mut p = MatchParams {
-        k,
-        k_process,
-        k_descr: MatchParams::default().k_descr.min(k_process),
-        orient_reversing: mirrored,
-        area_normalize,
-        ..MatchParams::default()
-    };
+    let mut p = MatchParams::unrefined();
+    p.k = k;
+    p.k_process = k_process;
+    p.descriptors.eigenpairs = MatchParams::default().descriptors.eigenpairs.min(k_process);
+    p.energy.orient_reversing = mirrored;
+    p.area_normalize = area_normalize;
     if let Some(w) = w_orient {
-        p.w_orient = w;
+        p.energy.weights.orient = w;
     }
     let kind = refiner_kind(refine, n_a.min(n_b))?;
-    let options = RefineOptions {
-        k,
-        schedule,
-        mirrored,
-        non_isometric,
-        samples: fmaps::pipeline::default_refine_samples(n_a, n_b),
-        ..RefineOptions::default()
-    };
-    p.refine =
-        named_refinement(kind, &options).map_err(|e| err(format!("refine = {refine:?}: {e}")))?;
-    p.starts = default_starts(kind, k_process.max(p.refine.k_needed()));
-    p.select_at = default_select_at(&p.refine);
+    let mut options = RefineOptions::for_map_size(k);
+    options.schedule = schedule;
+    options.mirrored = mirrored;
+    options.non_isometric = non_isometric;
+    options.samples = RefineSampling::default().samples_for(n_a, n_b);
+    p.set_refinement(kind, &options)
+        .map_err(|e| err(format!("refine = {refine:?}: {e}")))?;
     Ok(p)
 }
 
@@ -379,15 +370,15 @@ fn match_shapes(
     )?;
     if let Some(s) = starts {
         // Further initial sizes (`[]`: one start, as pyFM runs ZoomOut).
-        params.starts = s;
+        params.starts.sizes = s;
     }
     // As `fmaps match`: the eigenpairs the pipeline uses, or those given
     // (at least the refinement's).
     params.k_process = match k_process {
-        Some(kp) => kp.max(params.refine.k_needed()),
+        Some(kp) => kp.max(params.refinement.k_needed()),
         None => params.k_process_needed(),
     };
-    params.landmarks = landmarks;
+    params.descriptors.landmarks = landmarks;
     let (r, quality) = run(py, threads, move || {
         let r = fmaps::match_shapes(&ma, &mb, &params).map_err(|e| e.to_string())?;
         let q = fmaps::eval::map_quality(&r.t_ab, &ma, &mb, None).map_err(|e| e.to_string())?;
@@ -626,12 +617,10 @@ fn prepare(
     threads: Option<usize>,
 ) -> PyResult<PreparedShape> {
     let m = Arc::clone(&mesh.inner);
-    let params = MatchParams {
-        k_process,
-        k_descr: MatchParams::default().k_descr.min(k_process),
-        area_normalize,
-        ..MatchParams::default()
-    };
+    let mut params = MatchParams::unrefined();
+    params.k_process = k_process;
+    params.descriptors.eigenpairs = MatchParams::default().descriptors.eigenpairs.min(k_process);
+    params.area_normalize = area_normalize;
     // One thread for the eigensolver, as the pipeline prepares its shapes
     // (the basis does not depend on it).
     let mut single = params.clone();
@@ -683,9 +672,9 @@ fn match_prepared(
         a.area_normalize,
     )?;
     if let Some(s) = starts {
-        params.starts = s;
+        params.starts.sizes = s;
     }
-    params.landmarks = landmarks;
+    params.descriptors.landmarks = landmarks;
     let (r, quality) = run(py, threads, move || {
         let r = fmaps::pipeline::match_prepared(&pa, &pb, &params).map_err(|e| e.to_string())?;
         let mesh = |p: &fmaps::pipeline::PreparedShape| {

@@ -54,15 +54,14 @@ fn descriptor_params(
     k_descr: usize,
     subsample: usize,
 ) -> PyResult<MatchParams> {
-    Ok(MatchParams {
-        descriptor: kind
-            .parse()
-            .map_err(|e: String| err(format!("kind = {kind:?}: {e}")))?,
-        n_descr: n,
-        k_descr,
-        subsample,
-        ..MatchParams::default()
-    })
+    let mut p = MatchParams::unrefined();
+    p.descriptors.kind = kind
+        .parse()
+        .map_err(|e: String| err(format!("kind = {kind:?}: {e}")))?;
+    p.descriptors.n = n;
+    p.descriptors.eigenpairs = k_descr;
+    p.descriptors.subsample = subsample;
+    Ok(p)
 }
 
 /// The pipeline's descriptors of one shape (n x p, Fortran order, each
@@ -127,14 +126,14 @@ fn fit<'py>(
 ) -> PyResult<Bound<'py, PyArray2<f64>>> {
     let mut params = descriptor_params(kind, n, k_descr, 1)?;
     params.k = k;
-    params.orient_reversing = mirrored;
+    params.energy.orient_reversing = mirrored;
     if let Some(w) = w_orient {
-        params.w_orient = w;
+        params.energy.weights.orient = w;
     }
-    params.landmarks = landmark_pairs(landmarks, a.inner.basis.n(), b.inner.basis.n())?;
+    params.descriptors.landmarks = landmark_pairs(landmarks, a.inner.basis.n(), b.inner.basis.n())?;
     let given = match (&descr_a, &descr_b) {
         (Some(x), Some(y)) => {
-            if !params.landmarks.is_empty() {
+            if !params.descriptors.landmarks.is_empty() {
                 return Err(err(
                     "landmarks are for the pipeline's descriptors: with descr_a and descr_b, add landmark columns to them",
                 ));
@@ -154,8 +153,8 @@ fn fit<'py>(
         let (da, db) = match given {
             Some(d) => d,
             None => {
-                let lm_a: Vec<usize> = params.landmarks.iter().map(|p| p.0).collect();
-                let lm_b: Vec<usize> = params.landmarks.iter().map(|p| p.1).collect();
+                let lm_a: Vec<usize> = params.descriptors.landmarks.iter().map(|p| p.0).collect();
+                let lm_b: Vec<usize> = params.descriptors.landmarks.iter().map(|p| p.1).collect();
                 (
                     fmaps::pipeline::shape_descriptors(&pa, &lm_a, &params)?,
                     fmaps::pipeline::shape_descriptors(&pb, &lm_b, &params)?,
@@ -317,25 +316,19 @@ fn refine(
     }
     let kind = refiner_kind(method, 0)?;
     let t_ab = prepared_map(&map_ab, a, b)?;
-    let defaults = RefineOptions::default();
-    let options = RefineOptions {
-        k,
-        schedule,
-        icp_iterations: icp_iterations.unwrap_or(defaults.icp_iterations),
-        bijective,
-        adjoint,
-        sinkhorn,
-        mirrored,
-        ..defaults
-    };
-    let params = MatchParams {
-        k,
-        refine: fmaps::pipeline::named_refinement(kind, &options)
-            .map_err(|e| err(format!("method = {method:?}: {e}")))?,
-        adjoint,
-        area_normalize: a.area_normalize,
-        ..MatchParams::default()
-    };
+    let mut options = RefineOptions::for_map_size(k);
+    options.schedule = schedule;
+    options.icp_iterations = icp_iterations.unwrap_or(options.icp_iterations);
+    options.bijective = bijective;
+    options.adjoint = adjoint;
+    options.sinkhorn = sinkhorn;
+    options.mirrored = mirrored;
+    let mut params = MatchParams::unrefined();
+    params.k = k;
+    params.refinement = fmaps::pipeline::named_refinement(kind, &options)
+        .map_err(|e| err(format!("method = {method:?}: {e}")))?;
+    params.adjoint = adjoint;
+    params.area_normalize = a.area_normalize;
     let (pa, pb) = (Arc::clone(&a.inner), Arc::clone(&b.inner));
     let r = run(py, threads, move || {
         fmaps::pipeline::refine_point_map(&pa, &pb, &t_ab, &params)

@@ -12,7 +12,7 @@ use fmaps_solve::convert::{
 };
 use fmaps_solve::sinkhorn::Sinkhorn;
 
-/// Lloyd steps of ICP's clusters ([`fmaps_nearest::Partition::for_balls_with_steps`]).
+/// Lloyd steps of ICP's clusters ([`fmaps_nearest::BallsRequest::kmeans_steps`]).
 const ICP_KMEANS_STEPS: usize = 2;
 
 /// ICP in the spectral domain: alternate `T_BA = NN(C)` and

@@ -76,6 +76,7 @@ mod orientation;
 mod repair;
 mod sampling;
 mod shells;
+pub mod starts;
 mod zoomout;
 
 use std::fmt;
@@ -312,8 +313,9 @@ impl<'a> RefineInput<'a> {
 ///
 /// The input's `c_ab` is k_B x k_A (its sizes select the leading
 /// eigenpairs of each basis); the result holds the refined map and the
-/// point map B → A it induces.
-pub trait Refiner: Send + Sync {
+/// point map B → A it induces. `Debug` shows its parameters (a
+/// pipeline's parameters print the refiner they hold).
+pub trait Refiner: Send + Sync + std::fmt::Debug {
     /// A short name with the parameters (for reports and tables).
     fn name(&self) -> String;
 

@@ -41,7 +41,7 @@ pub struct Subsample {
 }
 
 /// Clusters for the full-size search among the `n` rows of a shape after
-/// iterations on samples: `n /` [`fmaps_nearest::coarse_ball_size`]`(n)`
+/// iterations on samples: `n /` [`fmaps_nearest::PartitionParams::coarse_ball_size`]`(n)`
 /// (rows per cluster about `√(n/5)`): on FAUST's 80k pair, 635 cells of
 /// ~126 rows, which search faster than the 5000 samples' cells of ~16
 /// (docs/benchmarks.md, "Large meshes: sampled refinement").
@@ -50,7 +50,8 @@ pub struct Subsample {
 /// assert_eq!(fmaps_refine::search_cells(80_000), 635);
 /// ```
 pub fn search_cells(n: usize) -> usize {
-    n.div_ceil(fmaps_nearest::coarse_ball_size(n)).max(1)
+    n.div_ceil(fmaps_nearest::PartitionParams::default().coarse_ball_size(n))
+        .max(1)
 }
 
 impl Subsample {
@@ -88,7 +89,7 @@ impl Subsample {
 
     /// The clusters of A's rows `rows_a` (one per vertex of A) for a
     /// full-size ball search: the cells of `nearest_a`, where the ball
-    /// search pays ([`fmaps_nearest::Partition::for_balls_from_labels`]);
+    /// search pays ([`fmaps_nearest::BallsRequest::labels`]);
     /// `None` without `nearest_a` or where another search is faster.
     pub fn cells_of_a(
         &self,
@@ -100,7 +101,10 @@ impl Subsample {
         // (Positions among the samples: below u32::MAX wherever the ball
         // search pays.)
         let labels = self.nearest_a.iter().map(|&j| j as u32).collect();
-        fmaps_nearest::Partition::for_balls_from_labels(rows_a, BALLS_MIN_ROWS, labels)
+        fmaps_nearest::Partition::for_balls(
+            rows_a,
+            fmaps_nearest::BallsRequest::new(BALLS_MIN_ROWS).labels(labels),
+        )
     }
 
     /// The guesses of the full-size search: for every vertex of B, the
@@ -641,7 +645,10 @@ const BALLS_MIN_ROWS: usize = 1024;
 /// matrix tiles from `fmaps_nearest::PartitionParams::tiled_from_rows`, `FMAPS_NO_BALLS`
 /// unset).
 pub(crate) fn balls_partition(r: &BasisRows) -> Option<std::sync::Arc<fmaps_nearest::Partition>> {
-    fmaps_nearest::Partition::for_balls(r.view(r.k()), BALLS_MIN_ROWS)
+    fmaps_nearest::Partition::for_balls(
+        r.view(r.k()),
+        fmaps_nearest::BallsRequest::new(BALLS_MIN_ROWS),
+    )
 }
 
 /// [`balls_partition`] with `steps` Lloyd steps (ICP's).
@@ -649,5 +656,8 @@ pub(crate) fn balls_partition_steps(
     r: &BasisRows,
     steps: usize,
 ) -> Option<std::sync::Arc<fmaps_nearest::Partition>> {
-    fmaps_nearest::Partition::for_balls_with_steps(r.view(r.k()), BALLS_MIN_ROWS, steps)
+    fmaps_nearest::Partition::for_balls(
+        r.view(r.k()),
+        fmaps_nearest::BallsRequest::new(BALLS_MIN_ROWS).kmeans_steps(steps),
+    )
 }

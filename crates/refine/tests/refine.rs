@@ -435,6 +435,7 @@ fn refiners_pass_the_exported_conformance_check() {
     }
 
     /// ZoomOut that then shifts every vertex of the map by one.
+    #[derive(Debug)]
     struct OffByOne(ZoomOut);
     impl Refiner for OffByOne {
         fn name(&self) -> String {

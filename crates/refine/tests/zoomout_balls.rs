@@ -66,7 +66,11 @@ fn zoomout_maps() {
     let (a, b) = (bumpy(0.08), bumpy(0.12));
     let (basis_a, basis_b) = (basis(&a, 40), basis(&b, 40));
     let rows = DMatrix::from_fn(a.n_vertices(), 40, |i, j| basis_a.eigenvectors[(i, j)]);
-    let clusters = fmaps_nearest::Partition::for_balls(fmaps_nearest::view(&rows), 1024).is_some();
+    let clusters = fmaps_nearest::Partition::for_balls(
+        fmaps_nearest::view(&rows),
+        fmaps_nearest::BallsRequest::new(1024),
+    )
+    .is_some();
     // An initial map with errors (the identity's leading block, bent).
     let c0 = DMatrix::from_fn(10, 10, |i, j| {
         (if i == j { 1.0 } else { 0.0 }) + 0.1 * ((3 * i + j) as f64).sin()

@@ -38,7 +38,9 @@
 #![deny(missing_docs)]
 
 mod rng;
+mod wedge;
 pub use rng::SplitMix;
+pub use wedge::{Fan, wedge_sums};
 
 #[cfg(target_arch = "x86_64")]
 use std::sync::OnceLock;

@@ -149,10 +149,13 @@ fn convert_once(
     let (rows_a, rows_b) = (BasisRows::new(basis_a, ka), BasisRows::new(basis_b, kb));
     // On large shapes without matrix tiles, the ball search (exact) over
     // k-means clusters of A's rows, sized for one search without guesses
-    // (`coarse_ball_size`): the searched rows (`Φ_A Cᵀ` or `Φ_A`) are a
+    // (`PartitionParams::coarse_ball_size`): the searched rows (`Φ_A Cᵀ` or `Φ_A`) are a
     // linear image of them, and a search without guesses otherwise
     // compares most pairs (docs/tuning.md: the 80k initial point map).
-    let params = match fmaps_nearest::Partition::for_one_search(rows_a.view(ka), BALLS_FROM_ROWS) {
+    let params = match fmaps_nearest::Partition::for_balls(
+        rows_a.view(ka),
+        fmaps_nearest::BallsRequest::new(BALLS_FROM_ROWS).one_search(),
+    ) {
         Some(p) => fmaps_nearest::NnParams::with_strategy(fmaps_nearest::NnStrategy::Balls)
             .with_partition(p),
         None => fmaps_nearest::NnParams::default(),

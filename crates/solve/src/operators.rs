@@ -207,14 +207,14 @@ pub fn orientation_operators(
             next.extend(fan.iter().map(|f| f.0));
             prev.extend(fan.iter().map(|f| f.1));
             let col = &mut wt[idx * pairs..(idx + 1) * pairs];
-            let fan = fmaps_nearest::Fan {
+            let fan = fmaps_simd::Fan {
                 rows: &padded,
                 kp,
                 k,
                 prev: &prev,
                 next: &next,
             };
-            fmaps_nearest::wedge_sums(&fan, col);
+            fmaps_simd::wedge_sums(&fan, col);
         }
         let d = gather_d(list);
         matmul(

@@ -12,7 +12,7 @@ pub fn run(argv: Vec<String>) -> Result<(), Box<dyn std::error::Error>> {
     let mb = fmaps::mesh_io::read_mesh(&args[2])?;
     let which = args.get(3).map_or("zoomout", |s| s.as_str());
     let reps: usize = args.get(4).map_or(3, |s| s.parse().unwrap());
-    let params = MatchParams::default();
+    let params = MatchParams::unrefined();
     let (pa, pb) = (prepare(&ma, &params)?, prepare(&mb, &params)?);
     let init = match_prepared(&pa, &pb, &params)?;
     if which == "fit" {

@@ -8,8 +8,10 @@ use std::time::Instant;
 use fmaps_solve::build_energy;
 use nalgebra::DMatrix;
 
-use super::guards::check_determined;
-use super::{MatchError, MatchParams, MatchTimes, PreparedShape, energy_params, shape_data};
+use super::error::MatchError;
+use super::params::MatchParams;
+use super::prepare::{PreparedShape, shape_data};
+use super::result::MatchTimes;
 use crate::solve;
 
 /// The functional map the descriptors determine, from [`fit_descriptors`].
@@ -32,7 +34,7 @@ pub struct Fit {
 /// preservation, commutativity with the descriptors' multiplication
 /// operators, Laplacian commutativity, orientation) is minimised exactly
 /// for `C_BA` of size `params.k`. Descriptors are compressed to their span
-/// first when `params.compress` (exact to rounding).
+/// first when `params.descriptors.compress` (exact to rounding).
 ///
 /// Errors: sizes that do not match the shapes or each other, non-finite
 /// descriptors, too few eigenpairs, and an energy without a unique
@@ -51,7 +53,7 @@ pub fn fit_descriptors(
 }
 
 /// Descriptors checked against the shapes and compressed to their span
-/// (with `params.compress`): what [`fit_described`] fits, once per pair
+/// (with `params.descriptors.compress`): what [`fit_described`] fits, once per pair
 /// whatever the number of map sizes tried (a multi-start run).
 pub(super) struct Described<'a> {
     da: Cow<'a, DMatrix<f64>>,
@@ -75,7 +77,7 @@ impl<'a> Described<'a> {
         // The energy only sees the span of the descriptors: drop the
         // directions below rounding level (exact to rounding, ~3x fewer
         // operators).
-        let (da, db) = if params.compress {
+        let (da, db) = if params.descriptors.compress {
             let (ca, cb) =
                 solve::compress_descriptors(da, &a.basis.mass, db, &b.basis.mass, 1e-15)?;
             (Cow::Owned(ca), Cow::Owned(cb))
@@ -149,11 +151,11 @@ pub(super) fn fit_described(
         &shape_data(a, &sa),
         db,
         da,
-        &energy_params(params),
+        &params.energy,
     )?;
     times.operators = t.elapsed().as_secs_f64();
     let t = Instant::now();
-    solve::normalize_weights(&mut energy, params.weights());
+    solve::normalize_weights(&mut energy, params.energy.weights);
     let c_ba = energy.minimize()?;
     check_determined(&c_ba, a.area, b.area)?;
     let energy_terms = energy.terms(&c_ba);
@@ -164,5 +166,39 @@ pub(super) fn fit_described(
         energy_terms,
         energy: energy_value,
         times,
+    })
+}
+
+/// Largest `|C_ij|`, relative to the area scale, accepted from the solve.
+/// C_BA pulls functions on B back to A: for a map that spreads A's area
+/// over B (ratio `r`) its columns have norm about `√r` between
+/// L²-orthonormal bases (≤ 1 entries for an isometry). A thousand times
+/// that is not a map; an undetermined solve gives 1e10 and more.
+const MAX_C_ENTRY: f64 = 1e3;
+
+/// Errors with [`MatchError::Undetermined`] when `c_ba` cannot be the
+/// pull-back of a map between shapes of areas `area_a` and `area_b`: far
+/// larger than one can be, or of numerical rank below half its size (the
+/// pull-back of a map that reaches most of B has singular values of order
+/// 1; a solve whose descriptors span only the constants on one shape gives
+/// rank 1).
+fn check_determined(c_ba: &DMatrix<f64>, area_a: f64, area_b: f64) -> Result<(), MatchError> {
+    let ratio = (area_a / area_b).max(area_b / area_a);
+    let scale = if ratio.is_finite() { ratio.sqrt() } else { 1.0 };
+    let max_entry = c_ba.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+    let k = c_ba.nrows().min(c_ba.ncols());
+    let sv = c_ba.singular_values();
+    let top = sv.iter().fold(0.0f64, |m, &x| m.max(x));
+    let rank = sv.iter().filter(|&&x| x > 1e-8 * top).count();
+    if max_entry <= MAX_C_ENTRY * scale && 2 * rank >= k {
+        return Ok(());
+    }
+    let ctc = c_ba.transpose() * c_ba;
+    let orthonormality = (ctc - DMatrix::identity(c_ba.ncols(), c_ba.ncols())).norm();
+    Err(MatchError::Undetermined {
+        max_entry,
+        rank,
+        k,
+        orthonormality,
     })
 }

@@ -6,13 +6,15 @@
 
 use std::time::Instant;
 
+use crate::refine::RefineReport;
 use fmaps_solve::convert::{BasisRows, pullback};
 use nalgebra::DMatrix;
-use refine::RefineReport;
 
-use super::{MatchError, MatchParams, PreparedShape, Refinement, orientation_of};
-use crate::refine::Refiner;
-use crate::{refine, solve};
+use super::error::MatchError;
+use super::params::MatchParams;
+use super::prepare::PreparedShape;
+use super::refining::{orientation_of, with_refiner};
+use crate::solve;
 
 /// The result of [`refine_point_map`].
 #[derive(Debug, Clone)]
@@ -38,7 +40,7 @@ pub struct RefinedMap {
 }
 
 /// Refines the point map `t_ab` (for every vertex of `a`, a vertex of `b`)
-/// with `params.refine`, starting from its pull-back
+/// with `params.refinement`, starting from its pull-back
 /// `C_BA = Φ_Aᵀ M_A Π_AB Φ_B` of size `params.k` (ZoomOut starts from its
 /// top-left `k_start` block). The shapes must be prepared with at least
 /// `params.k` and the refinement's eigenpairs.
@@ -61,7 +63,7 @@ pub fn refine_point_map(
     }
     let k = params.k;
     for (shape, s) in [("source", a), ("target", b)] {
-        let needed = k.max(params.refine.k_needed());
+        let needed = k.max(params.refinement.k_needed());
         if s.basis.k() < needed {
             return Err(MatchError::InvalidParameter(format!(
                 "the {shape} was prepared with {} eigenpairs; the refinement needs {needed}",
@@ -81,7 +83,7 @@ pub fn refine_point_map(
     let (sb, sa) = (b.basis.truncate(k), a.basis.truncate(k));
     let metrics_init = solve::fmap_metrics(&c_ba_init, &sb.eigenvalues, &sa.eigenvalues)?;
     let orientation_init = orientation_of(t_ab, a, b)?;
-    let refined = with_refiner(&params.refine, params.adjoint, a, b, |r| {
+    let refined = with_refiner(&params.refinement, params.adjoint, a, b, |r| {
         r.refine(
             &crate::refine::RefineInput::new(&c_ba_init, &b.basis, &a.basis)
                 .with_geometry(b.geometry(), a.geometry()),
@@ -104,78 +106,4 @@ pub fn refine_point_map(
         orientation,
         seconds: t.elapsed().as_secs_f64(),
     })
-}
-
-/// Calls `f` with the refiner `refine` describes for the pair (`a`, `b`)
-/// (`adjoint` forces the adjoint conversion); `None` for no refinement.
-pub(super) fn with_refiner<R>(
-    refine: &Refinement,
-    adjoint: bool,
-    a: &PreparedShape,
-    b: &PreparedShape,
-    f: impl FnOnce(&dyn Refiner) -> R,
-) -> Option<R> {
-    match refine {
-        Refinement::None => None,
-        Refinement::Icp(icp) => Some(f(&refine::Icp {
-            adjoint: icp.adjoint || adjoint,
-            ..*icp
-        })),
-        Refinement::ZoomOut { zoomout, samples } => {
-            let mut zo = zoomout.clone();
-            zo.adjoint |= adjoint;
-            // The refiner's "A" is the target (see `refine_result`).
-            if let Some(m) = samples {
-                zo = sampled(zo, a, b, *m);
-            }
-            Some(f(&zo))
-        }
-        Refinement::Custom(r) => Some(f(r.as_ref())),
-    }
-}
-
-/// Iterations on every vertex after a sub-sampled ZoomOut's iterations on
-/// samples ([`refine::ZoomOut::full_iterations`]) in the pipeline.
-pub const SAMPLED_FULL_ITERATIONS: usize = 1;
-
-/// A sub-sampled ZoomOut's samples, drawn once for every start: `params`
-/// with the [`refine::Subsample`] in place of `samples` (the refiner's A
-/// is the target), and the seconds it took; `None` for other refinements.
-pub(super) fn draw_samples(
-    a: &PreparedShape,
-    b: &PreparedShape,
-    params: &MatchParams,
-) -> (Option<MatchParams>, f64) {
-    let Refinement::ZoomOut {
-        zoomout,
-        samples: Some(m),
-    } = &params.refine
-    else {
-        return (None, 0.0);
-    };
-    let t = Instant::now();
-    let p = MatchParams {
-        refine: Refinement::ZoomOut {
-            zoomout: sampled(zoomout.clone(), a, b, *m),
-            samples: None,
-        },
-        ..params.clone()
-    };
-    (Some(p), t.elapsed().as_secs_f64())
-}
-
-/// `zoomout` on `m` farthest points per shape of the pair (`a`, `b`), as
-/// the pipeline runs it (the refiner's A is the target; then
-/// [`SAMPLED_FULL_ITERATIONS`] on every vertex).
-fn sampled(
-    zoomout: refine::ZoomOut,
-    a: &PreparedShape,
-    b: &PreparedShape,
-    m: usize,
-) -> refine::ZoomOut {
-    refine::ZoomOut {
-        subsample: Some(refine::Subsample::farthest(&b.vertices, &a.vertices, m)),
-        full_iterations: SAMPLED_FULL_ITERATIONS,
-        ..zoomout
-    }
 }

@@ -3,12 +3,14 @@
 
 use std::time::Instant;
 
-use super::fit::{Described, fit_described};
-use super::{
-    MatchError, MatchParams, MatchResult, MatchTimes, PreparedShape, Refinement, orientation_of,
-    refine_result, with_refiner,
-};
 use nalgebra::DMatrix;
+
+use super::error::MatchError;
+use super::fit::{Described, fit_described};
+use super::params::MatchParams;
+use super::prepare::PreparedShape;
+use super::refining::{initial_map, orientation_of, refine_result, with_refiner};
+use super::result::{MatchResult, MatchTimes};
 
 use crate::solve;
 
@@ -66,64 +68,11 @@ pub(super) fn match_described_deferred(
         energy: energy_value,
         times,
     };
-    if let Some(r) = with_refiner(&params.refine, params.adjoint, a, b, |r| {
+    if let Some(r) = with_refiner(&params.refinement, params.adjoint, a, b, |r| {
         refine_result(&mut out, a, b, r)
     }) {
         r?;
     }
     out.orientation = orientation_of(&out.t_ab, a, b)?;
     Ok((out, c_init))
-}
-
-/// The initial point map `T_AB` of the fit `c_ba` (k x k).
-/// With a sub-sampled ZoomOut's samples, the search bounds the target's
-/// sample cells by balls (free where the default k-means clusters of a
-/// large shape's rows take about as long as the search) and starts each
-/// vertex from its nearest sample's image under the samples' map (a small
-/// search): the same exact nearest neighbours.
-pub(super) fn initial_map(
-    c_ba: &DMatrix<f64>,
-    a: &PreparedShape,
-    b: &PreparedShape,
-    params: &MatchParams,
-) -> Result<Vec<usize>, MatchError> {
-    use crate::nearest::{NnParams, NnStrategy};
-    use crate::solve::convert::{BasisRows, Conversion, point_map};
-    let k = c_ba.ncols();
-    if let Refinement::ZoomOut { zoomout, .. } = &params.refine
-        && let Some(s) = &zoomout.subsample
-        && s.nearest_b.len() == a.basis.n()
-    {
-        // The refiner's A is the target.
-        let rows_b = BasisRows::new(&b.basis, k);
-        if let Some(p) = s.cells_of_a(rows_b.view(k)) {
-            let conversion = if params.adjoint {
-                Conversion::Adjoint
-            } else {
-                Conversion::Direct
-            };
-            let (sb, sa) = (
-                BasisRows::at_vertices(&b.basis, k, &s.a)?,
-                BasisRows::at_vertices(&a.basis, k, &s.b)?,
-            );
-            let on_samples = point_map(c_ba, &sb, &sa, conversion, None, &NnParams::default())?;
-            let rows_a = BasisRows::new(&a.basis, k);
-            let nn = NnParams::with_strategy(NnStrategy::Balls).with_partition(p);
-            let guesses = s.guesses(&on_samples);
-            return Ok(point_map(
-                c_ba,
-                &rows_b,
-                &rows_a,
-                conversion,
-                guesses.as_deref(),
-                &nn,
-            )?);
-        }
-    }
-    let (sb, sa) = (b.basis.truncate(k), a.basis.truncate(k));
-    Ok(if params.adjoint {
-        solve::point_map_from_fmap_adjoint(c_ba, &sb, &sa)?
-    } else {
-        solve::point_map_from_fmap(c_ba, &sb, &sa)?
-    })
 }

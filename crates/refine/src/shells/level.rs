@@ -4,7 +4,7 @@
 //! [`super::arap`]; the shape that moves: [`super::shell`]).
 
 use faer::MatRef;
-use fmaps_nearest::{NnParams, Partition, nearest_rows, nearest_rows_both};
+use fmaps_nearest::{BallsRequest, NnParams, Partition, nearest_rows, nearest_rows_both};
 use nalgebra::{DMatrix, Matrix3, Vector3};
 
 use super::arap::rotations;
@@ -177,7 +177,7 @@ pub(super) const HINTED_BALLS_FROM_COLS: usize = 33;
 ///   docs/tuning.md has the measurement, the same maps);
 /// - without guesses from [`BALLS_FROM_ROWS`] rows (the final point map
 ///   on every vertex), over `cells` or k-means clusters sized for one
-///   search ([`fmaps_nearest::Partition::for_one_search`]): positions, normals
+///   search ([`BallsRequest::one_search`]): positions, normals
 ///   and spectral features are smooth on the surface, so the clusters are
 ///   compact (FAUST pair subdivided twice, 80k vertices, 197 columns:
 ///   brute force compared all 6.4·10⁹ pairs per finalist).
@@ -188,14 +188,20 @@ fn search_params(data: MatRef<'_, f64>, cells: Option<&[u32]>, hinted: bool) -> 
     let balls = |p| NnParams::with_strategy(fmaps_nearest::NnStrategy::Balls).with_partition(p);
     if hinted
         && data.ncols() >= HINTED_BALLS_FROM_COLS
-        && let Some(p) =
-            cells.and_then(|c| Partition::for_balls_over_brute_from_labels(data, 1, c.to_vec()))
+        && let Some(p) = cells.and_then(|c| {
+            Partition::for_balls(data, BallsRequest::new(1).labels(c.to_vec()).over_brute())
+        })
     {
         return balls(p);
     }
     let partition = match cells {
-        Some(c) => Partition::for_balls_over_brute_from_labels(data, BALLS_FROM_ROWS, c.to_vec()),
-        None => Partition::for_one_search(data, BALLS_FROM_ROWS),
+        Some(c) => Partition::for_balls(
+            data,
+            BallsRequest::new(BALLS_FROM_ROWS)
+                .labels(c.to_vec())
+                .over_brute(),
+        ),
+        None => Partition::for_balls(data, BallsRequest::new(BALLS_FROM_ROWS).one_search()),
     };
     match partition {
         Some(p) => balls(p),

@@ -67,12 +67,12 @@ pub fn wedge_sums(fan: &Fan<'_>, out: &mut [f64]) {
     assert!(out.len() >= k * k.saturating_sub(1) / 2);
     #[cfg(target_arch = "x86_64")]
     {
-        if crate::cpu::has_v4() {
+        if crate::has_v4() {
             // SAFETY: the CPU supports AVX-512F (checked just above); the
             // bounds the kernel relies on are asserted above.
             return unsafe { x86::wedge_sums_avx512(fan, out) };
         }
-        if crate::cpu::has_v3() {
+        if crate::has_v3() {
             // SAFETY: the CPU supports AVX2 and FMA (checked just above).
             return unsafe { x86::wedge_sums_avx2(fan, out) };
         }

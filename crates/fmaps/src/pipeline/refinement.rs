@@ -1,12 +1,111 @@
-//! The refinements by name, as `fmaps match --refine NAME`, `fmaps refine`
-//! and the Python package name them, and the policy of what runs without
-//! a name: one place, so every front end builds the same refiner from the
-//! same options and gets the same map.
+//! The refinement stage's choices: the [`Refinement`] the pipeline runs,
+//! the refinements by name (as `fmaps match --refine NAME`, `fmaps
+//! refine` and the Python package name them) and the policy of what runs
+//! without a name: one place, so every front end builds the same refiner
+//! from the same options and gets the same map.
 
 use std::sync::Arc;
 
-use super::{MatchError, Refinement, ZOOMOUT_STARTS};
-use crate::refine::{self, Icp, ZoomOut};
+use super::error::MatchError;
+use crate::refine::{self, Icp, Refiner, ZoomOut};
+
+/// The refinement stage of the pipeline.
+#[derive(Clone, Default)]
+pub enum Refinement {
+    /// The initial map as solved.
+    #[default]
+    None,
+    /// Spectral ICP at the map's size.
+    Icp(refine::Icp),
+    /// ZoomOut, its iterations optionally on farthest-point samples.
+    ZoomOut {
+        /// Schedule and variants (its `subsample` must stay `None`: the
+        /// pipeline samples the shapes itself, see `samples`).
+        zoomout: refine::ZoomOut,
+        /// Run the iterations on this many farthest points per shape
+        /// (Euclidean farthest point sampling from vertex 0); `None`: all
+        /// vertices.
+        samples: Option<usize>,
+    },
+    /// Any [`Refiner`], given `C_BA` between the bases of the target and
+    /// the source (the pipeline's map is `T_AB`, so its refiner's "A" is
+    /// the target shape: see [`refine_result`](super::refine_result)).
+    Custom(Arc<dyn Refiner>),
+}
+
+impl std::fmt::Debug for Refinement {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Refinement::None => f.write_str("None"),
+            Refinement::Icp(icp) => f.debug_tuple("Icp").field(icp).finish(),
+            Refinement::ZoomOut { zoomout, samples } => f
+                .debug_struct("ZoomOut")
+                .field("zoomout", zoomout)
+                .field("samples", samples)
+                .finish(),
+            Refinement::Custom(r) => f.debug_tuple("Custom").field(r).finish(),
+        }
+    }
+}
+
+impl Refinement {
+    /// ZoomOut with a schedule and no sub-sampling.
+    pub fn zoomout(k_start: usize, k_final: usize, step: usize) -> Self {
+        Refinement::ZoomOut {
+            zoomout: refine::ZoomOut {
+                k_start,
+                k_final,
+                step,
+                ..refine::ZoomOut::default()
+            },
+            samples: None,
+        }
+    }
+
+    /// The refinement `fmaps match` runs when no refinement is asked for:
+    /// Smooth Shells ([`refine::SmoothShells::default`]), chosen by
+    /// measurement as the most accurate on every collection (near-isometric
+    /// and non-isometric; docs/benchmarks.md has the errors and times). It
+    /// needs 200 eigenpairs per shape, so meshes of more than 200
+    /// vertices ([`RefinerKind::default_for`] keeps the initial map on
+    /// smaller ones).
+    pub fn recommended() -> Self {
+        Refinement::Custom(Arc::new(refine::SmoothShells::default()))
+    }
+
+    /// ZoomOut with [`refine::ZoomOut::default`]'s schedule (50 → 150 in
+    /// steps of 5, as pyFM users run it), no sub-sampling.
+    pub fn default_zoomout() -> Self {
+        Refinement::ZoomOut {
+            zoomout: refine::ZoomOut::default(),
+            samples: None,
+        }
+    }
+
+    /// The largest basis size the refinement needs.
+    pub fn k_needed(&self) -> usize {
+        match self {
+            Refinement::None => 0,
+            Refinement::Icp(icp) => icp.k_needed(),
+            Refinement::ZoomOut { zoomout, .. } => zoomout.k_needed(),
+            Refinement::Custom(r) => r.k_needed(),
+        }
+    }
+}
+
+/// The further initial sizes a refinement on a ZoomOut schedule runs
+/// from by default ([`default_starts`]): ZoomOut from initial maps of
+/// sizes 50, 8 and 20, keeping the result of lowest area distortion
+/// ([`StartSelection::Area`](crate::refine::starts::StartSelection::Area)).
+/// Measured with exact geodesics against the previous default (starts 50,
+/// 20, 30, best orientation kept), mean error x100 on the first test
+/// pairs: TOSCA_Isometric 4.11 -> 2.65, FAUST 5.89 -> 3.60, generated-iso
+/// 2.46 -> 2.43, generated-noniso 39.2 -> 37.4, at the same number of runs.
+const ZOOMOUT_STARTS: [usize; 2] = [8, 20];
+
+/// The size of the initial map (`k`) of the literature's automatic
+/// pipeline: 50 x 50.
+pub(super) const DEFAULT_K: usize = 50;
 
 /// A refinement by name.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -102,7 +201,7 @@ impl RefinerKind {
     }
 
     /// Whether the kind runs on a ZoomOut schedule (and so from the
-    /// further starts [`ZOOMOUT_STARTS`] by default).
+    /// further starts [`default_starts`] by default).
     pub fn has_schedule(self) -> bool {
         matches!(
             self,
@@ -135,6 +234,7 @@ impl std::str::FromStr for RefinerKind {
 
 /// The options a named refinement is built from (`fmaps match`'s flags).
 #[derive(Debug, Clone, PartialEq)]
+#[non_exhaustive]
 pub struct RefineOptions {
     /// Size of the initial map (a schedule must start at or below it).
     pub k: usize,
@@ -164,7 +264,7 @@ pub struct RefineOptions {
 impl Default for RefineOptions {
     fn default() -> Self {
         RefineOptions {
-            k: super::MatchParams::default().k,
+            k: DEFAULT_K,
             schedule: None,
             icp_iterations: Icp::default().max_iterations,
             samples: None,
@@ -178,6 +278,14 @@ impl Default for RefineOptions {
 }
 
 impl RefineOptions {
+    /// The default options for an initial map of size `k`.
+    pub fn for_map_size(k: usize) -> RefineOptions {
+        RefineOptions {
+            k,
+            ..RefineOptions::default()
+        }
+    }
+
     /// The ZoomOut schedule asked for, checked against the map's size.
     fn zoomout(&self) -> Result<ZoomOut, MatchError> {
         let z = match &self.schedule {
@@ -210,7 +318,7 @@ impl RefineOptions {
 ///
 /// let r = named_refinement("zoomout".parse()?, &RefineOptions::default())?;
 /// assert_eq!(r.k_needed(), 150);
-/// let short = RefineOptions { k: 30, ..RefineOptions::default() };
+/// let short = RefineOptions::for_map_size(30);
 /// assert!(named_refinement(RefinerKind::Zoomout, &short).is_err());
 /// # Ok::<(), fmaps::pipeline::MatchError>(())
 /// ```
@@ -258,7 +366,7 @@ pub fn named_refinement(
 }
 
 /// The further starts `kind` runs from by default when the shapes hold
-/// `k_process` eigenpairs: [`ZOOMOUT_STARTS`] (those within the basis)
+/// `k_process` eigenpairs: 8 and 20 (those within the basis)
 /// for the kinds on a ZoomOut schedule, none otherwise.
 pub fn default_starts(kind: RefinerKind, k_process: usize) -> Vec<usize> {
     if kind.has_schedule() {
@@ -271,40 +379,54 @@ pub fn default_starts(kind: RefinerKind, k_process: usize) -> Vec<usize> {
     }
 }
 
-/// Farthest points per shape that ZoomOut's iterations run on when
-/// [`default_refine_samples`] samples. On six FAUST pairs subdivided to
-/// 80k vertices (the default three-start ZoomOut) 10000 samples gave the
-/// mean error of the unsampled run (x100: 1.926 against 1.929), where
-/// 5000 gave 1.964, worse on five of the six pairs, and two more
-/// iterations on every vertex after the 5000 samples' did not close the
-/// gap (docs/benchmarks.md, "Large meshes: sampled refinement").
-pub const AUTO_REFINE_SAMPLES: usize = 10_000;
-
-/// Vertices of the larger mesh above which [`default_refine_samples`]
-/// samples.
-pub const AUTO_SAMPLES_ABOVE: usize = 20_000;
-
-/// The vertices a ZoomOut's iterations run on when the caller does not
-/// say, for meshes of `n_a` and `n_b` vertices: every vertex (`None`) up
-/// to [`AUTO_SAMPLES_ABOVE`] vertices in the larger mesh, above that
-/// [`AUTO_REFINE_SAMPLES`] farthest points per shape (the ZoomOut paper's
-/// fast variant: the iterations on samples, the final map on every
-/// vertex). `fmaps match`, `fmaps batch` and the Python package follow
-/// it and say so. On six FAUST pairs subdivided to 80k vertices the
-/// sampled three-start ZoomOut gives the mean error of the unsampled one
-/// in about a quarter of the time.
+/// When a ZoomOut's iterations run on farthest-point samples instead of
+/// every vertex (the ZoomOut paper's fast variant: the iterations on
+/// samples, the final map on every vertex), for callers that do not say.
+/// `fmaps match`, `fmaps batch` and the Python package follow
+/// [`RefineSampling::default`] and say so.
 ///
 /// ```
-/// use fmaps::pipeline::{default_refine_samples, AUTO_REFINE_SAMPLES};
-/// assert_eq!(default_refine_samples(5000, 6890), None);
-/// assert_eq!(default_refine_samples(5000, 80_000), Some(AUTO_REFINE_SAMPLES));
+/// use fmaps::pipeline::RefineSampling;
+/// let policy = RefineSampling::default();
+/// assert_eq!(policy.samples_for(5000, 6890), None);
+/// assert_eq!(policy.samples_for(5000, 80_000), Some(policy.samples));
 /// ```
-pub fn default_refine_samples(n_a: usize, n_b: usize) -> Option<usize> {
-    (n_a.max(n_b) > AUTO_SAMPLES_ABOVE).then_some(AUTO_REFINE_SAMPLES)
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[non_exhaustive]
+pub struct RefineSampling {
+    /// Vertices of the larger mesh above which the iterations run on
+    /// samples (20000).
+    pub above: usize,
+    /// Farthest points per shape (10000). On six FAUST pairs subdivided to
+    /// 80k vertices (the default three-start ZoomOut) 10000 samples gave
+    /// the mean error of the unsampled run (x100: 1.926 against 1.929) in
+    /// about a quarter of the time, where 5000 gave 1.964, worse on five
+    /// of the six pairs, and two more iterations on every vertex after the
+    /// 5000 samples' did not close the gap (docs/benchmarks.md, "Large
+    /// meshes: sampled refinement").
+    pub samples: usize,
+}
+
+impl Default for RefineSampling {
+    fn default() -> Self {
+        RefineSampling {
+            above: 20_000,
+            samples: 10_000,
+        }
+    }
+}
+
+impl RefineSampling {
+    /// The samples per shape for meshes of `n_a` and `n_b` vertices:
+    /// `None` (every vertex) up to [`above`](Self::above) vertices in the
+    /// larger mesh, [`samples`](Self::samples) beyond.
+    pub fn samples_for(&self, n_a: usize, n_b: usize) -> Option<usize> {
+        (n_a.max(n_b) > self.above).then_some(self.samples)
+    }
 }
 
 /// Where a multi-start ZoomOut stops its starts by default
-/// ([`MatchParams::select_at`](super::MatchParams::select_at)): the
+/// ([`Starts::select_at`](super::Starts::select_at)): the
 /// middle of the schedule, `(k_start + k_final) / 2` (100 for 50:150:5),
 /// when that is strictly between its ends; `None` for other refinements.
 /// The starts' maps at that size already tell which one converges to the
