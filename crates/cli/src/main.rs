@@ -264,11 +264,23 @@ macro_rules! outln_impl {
 
 pub(crate) use outln_impl as outln;
 
-/// Prints a buffer; a closed pipe (`fmaps ... | head`) is not an error.
+/// Set when an output is `-` (standard output): the report then goes to
+/// standard error, so that standard output carries the output alone.
+pub(crate) static STDOUT_IS_AN_OUTPUT: std::sync::atomic::AtomicBool =
+    std::sync::atomic::AtomicBool::new(false);
+
+/// Prints a buffer (to standard error when standard output carries an
+/// output); a closed pipe (`fmaps ... | head`) is not an error.
 pub(crate) fn emit(text: &str) -> Result<(), Failure> {
     use std::io::Write as _;
-    let mut out = std::io::stdout().lock();
-    match out.write_all(text.as_bytes()).and_then(|()| out.flush()) {
+    let r = if STDOUT_IS_AN_OUTPUT.load(std::sync::atomic::Ordering::Relaxed) {
+        let mut out = std::io::stderr().lock();
+        out.write_all(text.as_bytes()).and_then(|()| out.flush())
+    } else {
+        let mut out = std::io::stdout().lock();
+        out.write_all(text.as_bytes()).and_then(|()| out.flush())
+    };
+    match r {
         Err(e) if e.kind() == std::io::ErrorKind::BrokenPipe => Ok(()),
         r => r.map_err(runtime),
     }

@@ -349,7 +349,14 @@ pub(crate) fn match_failure(e: fmaps::pipeline::MatchError, file: Option<&Path>)
                 | fmaps::eigensolve::Error::NonPositiveMass { .. }
                 | fmaps::eigensolve::Error::InvalidParameter(_),
             ..
-        } => 2,
+        }
+        // A refinement the options do not allow on these meshes (too few
+        // samples for the schedule, too few eigenpairs).
+        | MatchError::Refine(
+            fmaps::refine::Error::InvalidParameter(_)
+            | fmaps::refine::Error::NotEnoughEigenpairs { .. }
+            | fmaps::refine::Error::SingularSample { .. },
+        ) => 2,
         _ => 1,
     };
     let e = anyhow::Error::new(e);

@@ -1,7 +1,8 @@
 //! Output files of a command: never an input, never named twice, and
-//! written together — each to a temporary sibling first, all renamed into
-//! place only once every one is complete, so a failure leaves every
-//! previous file as it was.
+//! written together ([`mesh_io::atomic::Outputs`]) — every content produced
+//! first, then devices and pipes written through and regular files renamed
+//! into place, so a failure while producing any output leaves every output
+//! as it was.
 
 use std::path::{Path, PathBuf};
 
@@ -23,11 +24,78 @@ fn resolved(p: &Path) -> PathBuf {
     }
 }
 
-/// Refuses outputs that would overwrite an input or each other (exit 2).
+/// Whether `out` is the file, pipe or terminal this process's standard
+/// output writes to (`--out /dev/stdout`): the report then goes to
+/// standard error.
+fn is_our_stdout(out: &Path) -> bool {
+    #[cfg(unix)]
+    {
+        use std::os::fd::AsFd;
+        use std::os::unix::fs::MetadataExt;
+        let ours = std::io::stdout()
+            .as_fd()
+            .try_clone_to_owned()
+            .map(std::fs::File::from)
+            .and_then(|f| f.metadata());
+        match (ours, std::fs::metadata(out)) {
+            (Ok(a), Ok(b)) => a.dev() == b.dev() && a.ino() == b.ino(),
+            _ => false,
+        }
+    }
+    #[cfg(not(unix))]
+    {
+        let _ = out;
+        false
+    }
+}
+
+/// Refuses (exit 2) a path that cannot take an output: a directory, a
+/// loop of links, a file in a folder that does not exist.
+fn writable(out: &Path) -> Result<(), Failure> {
+    use mesh_io::atomic::OutputTarget;
+    let bad = |why: String| {
+        Err(input(anyhow::anyhow!(
+            "{}: cannot be written as an output: {why}",
+            out.display()
+        )))
+    };
+    match mesh_io::atomic::output_target(out) {
+        Err(e) => bad(e.to_string()),
+        Ok(OutputTarget::File(p)) => {
+            let dir = match p.parent() {
+                Some(d) if !d.as_os_str().is_empty() => d,
+                _ => Path::new("."),
+            };
+            if dir.is_dir() {
+                Ok(())
+            } else {
+                bad(format!("the folder {} does not exist", dir.display()))
+            }
+        }
+        Ok(_) => Ok(()),
+    }
+}
+
+/// Refuses outputs that would overwrite an input or each other, or that
+/// no file can be written to (exit 2).
 pub(crate) fn check_outputs(inputs: &[&Path], outputs: &[&Path]) -> Result<(), Failure> {
     let ins: Vec<PathBuf> = inputs.iter().map(|p| resolved(p)).collect();
     let mut seen: Vec<(PathBuf, &Path)> = Vec::new();
     for out in outputs {
+        if out.as_os_str() == "-" {
+            if seen.iter().any(|(_, o)| o.as_os_str() == "-") {
+                return Err(input(anyhow::anyhow!(
+                    "-: standard output named for two outputs"
+                )));
+            }
+            crate::STDOUT_IS_AN_OUTPUT.store(true, std::sync::atomic::Ordering::Relaxed);
+            seen.push((PathBuf::from("-"), out));
+            continue;
+        }
+        writable(out)?;
+        if is_our_stdout(out) {
+            crate::STDOUT_IS_AN_OUTPUT.store(true, std::sync::atomic::Ordering::Relaxed);
+        }
         let r = resolved(out);
         if let Some(i) = ins.iter().position(|x| *x == r) {
             return Err(input(anyhow::anyhow!(
@@ -49,45 +117,43 @@ pub(crate) fn check_outputs(inputs: &[&Path], outputs: &[&Path]) -> Result<(), F
 }
 
 /// Outputs written together ([`stage`](Self::stage), then
-/// [`commit`](Self::commit)); dropped without a commit, the temporaries
-/// are removed and the targets untouched.
+/// [`commit`](Self::commit)), by the policy of
+/// [`mesh_io::atomic`]: regular files atomically, devices, FIFOs and
+/// sockets written through, links followed, `-` to standard output;
+/// dropped without a commit, the temporaries are removed and every output
+/// is as it was.
 #[derive(Default)]
 pub(crate) struct Staged {
-    files: Vec<(PathBuf, PathBuf)>,
+    outputs: mesh_io::atomic::Outputs,
 }
 
 impl Staged {
-    /// Writes `path`'s content to a temporary sibling through `write`
-    /// (given the temporary's path).
+    /// Writes `path`'s content to a temporary file through `write` (given
+    /// the temporary's path). A path that cannot be an output (a
+    /// directory) is bad input (exit 2); a failure to write is exit 1.
     pub(crate) fn stage(
         &mut self,
         path: &Path,
         write: impl FnOnce(&Path) -> anyhow::Result<()>,
     ) -> Result<(), Failure> {
-        let tmp = mesh_io::atomic::temporary_path(path);
-        // Registered first, so that a partial temporary is removed too.
-        self.files.push((tmp.clone(), path.to_path_buf()));
-        write(&tmp)
+        if let Err(e) = mesh_io::atomic::output_target(path) {
+            return Err(input(anyhow::anyhow!(
+                "{}: cannot be written as an output: {e}",
+                path.display()
+            )));
+        }
+        self.outputs
+            .stage(path, |tmp| -> anyhow::Result<()> { write(tmp) })
             .with_context(|| format!("writing {}", path.display()))
             .map_err(runtime)
     }
 
-    /// Renames every staged file into place.
-    pub(crate) fn commit(mut self) -> Result<(), Failure> {
-        for (tmp, path) in std::mem::take(&mut self.files) {
-            std::fs::rename(&tmp, &path)
-                .with_context(|| format!("writing {}", path.display()))
-                .map_err(runtime)?;
-        }
-        Ok(())
-    }
-}
-
-impl Drop for Staged {
-    fn drop(&mut self) {
-        for (tmp, _) in &self.files {
-            let _ = std::fs::remove_file(tmp);
-        }
+    /// Writes every staged output into place.
+    pub(crate) fn commit(self) -> Result<(), Failure> {
+        self.outputs
+            .commit()
+            .context("writing the outputs")
+            .map_err(runtime)
     }
 }
 

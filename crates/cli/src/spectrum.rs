@@ -26,6 +26,11 @@ pub(crate) fn spectrum(
     json: bool,
     out: Option<&Path>,
 ) -> Result<(), Failure> {
+    if out.is_some_and(|p| p.as_os_str() == "-") {
+        return Err(input(anyhow::anyhow!(
+            "--out -: the basis is three files (FILE.npy, FILE_eigenvalues.npy, FILE_mass.npy); name FILE.npy"
+        )));
+    }
     let files = out.map(basis_files);
     if let Some(f) = &files {
         let outs: Vec<&Path> = f.iter().map(PathBuf::as_path).collect();

@@ -133,9 +133,11 @@ fn outputs_are_atomic_and_never_clobber_inputs() {
     let (code, err) = run(&["--out", "x.map", "--save-fmap", "./x.map"]);
     assert_eq!(code, Some(2), "{err}");
     assert!(err.contains("two outputs"), "{err}");
-    // The second output cannot be written: the first stays as it was.
+    // The second output cannot be written (its folder does not exist):
+    // refused before any work, the first stays as it was.
     let (code, err) = run(&["--out", "keep.map", "--save-fmap", "no/such/dir/C.txt"]);
-    assert_eq!(code, Some(1), "{err}");
+    assert_eq!(code, Some(2), "{err}");
+    assert!(err.contains("does not exist"), "{err}");
     assert_eq!(
         std::fs::read_to_string(dir.join("keep.map")).unwrap(),
         "old content\n"
