@@ -24,7 +24,10 @@ pub(crate) struct BatchArgs {
     data: PathBuf,
     /// Output folder (created): A_B.map (as `fmaps match --out`), A_B.json
     /// per pair, report.jsonl (every finished pair, in the file's order)
-    /// and bases/ (the eigenbasis cache).
+    /// and bases/ (the eigenbasis cache). Batches may share it (shards of
+    /// one job, or the same shard twice): a pair or a basis one of them is
+    /// working on is left to it (locks in .locks/), and the last to finish
+    /// writes the whole report.
     #[arg(long)]
     out: PathBuf,
     /// This job's share `I/N` (1-based): pairs I, I + N, I + 2N, ... of the
@@ -186,7 +189,11 @@ impl Shapes<'_> {
             params.k_process, params.spectrum.mass, params.spectrum.backend, params.area_normalize
         );
         let dir = self.args.out.join("bases");
-        let file = dir.join(format!("{name}-{:016x}.npz", fnv64(key.as_bytes())));
+        let stem = format!("{name}-{:016x}", fnv64(key.as_bytes()));
+        let file = dir.join(format!("{stem}.npz"));
+        // One process computes a basis at a time: another batch on the
+        // same folder waits here, then finds it in the cache.
+        let _lock = lock(&self.args.out, &format!("bases-{stem}"), true)?;
         let cached = read_basis(&file)
             .ok()
             .filter(|b| b.key == key && b.n() == mesh.n_vertices())
@@ -263,6 +270,8 @@ pub(crate) fn batch(args: &BatchArgs) -> Result<(), Failure> {
     }
     std::fs::create_dir_all(&args.out)
         .map_err(|e| runtime(anyhow::anyhow!("{}: {e}", args.out.display())))?;
+    remove_stale_temporaries(&args.out);
+    remove_stale_temporaries(&args.out.join("bases"));
     let mut shapes = Shapes {
         args,
         pairs_file: &args.pairs,
@@ -272,8 +281,19 @@ pub(crate) fn batch(args: &BatchArgs) -> Result<(), Failure> {
     let (mut done, mut skipped, mut failed) = (0usize, 0usize, 0usize);
     // The exit code of the failures: 2 if any pair had bad input, else 1.
     let mut code = 1;
+    let mut busy = 0usize;
     for p in &mine {
         let stem = format!("{}_{}", p.a, p.b);
+        if args.out.join(format!("{stem}.json")).is_file() {
+            skipped += 1;
+            continue;
+        }
+        // A pair another batch on the same folder is matching: left to it.
+        let Some(_claim) = lock(&args.out, &format!("pair-{stem}"), false)? else {
+            busy += 1;
+            continue;
+        };
+        // Finished by another batch between the check and the claim.
         if args.out.join(format!("{stem}.json")).is_file() {
             skipped += 1;
             continue;
@@ -288,8 +308,13 @@ pub(crate) fn batch(args: &BatchArgs) -> Result<(), Failure> {
         }
     }
     write_report(args, &all)?;
+    let elsewhere = if busy > 0 {
+        format!(" ({busy} left to another batch on this folder)")
+    } else {
+        String::new()
+    };
     eprintln!(
-        "{} pairs in this shard ({}/{}): {done} matched, {skipped} already done, {failed} failed; report: {}",
+        "{} pairs in this shard ({}/{}): {done} matched, {skipped} already done, {failed} failed{elsewhere}; report: {}",
         mine.len(),
         shard + 1,
         shards,
@@ -377,9 +402,68 @@ fn errors(
     Ok(json!({"mean": r.mean_error, "sym_mean": r.sym_mean_error, "geodesic": r.geodesic}))
 }
 
+/// Removes the temporary files (`.NAME.PID.K.tmp`) that a killed process
+/// left in `dir`: those whose process no longer runs (Linux: no
+/// `/proc/PID`). They are never read, only space; elsewhere they stay.
+fn remove_stale_temporaries(dir: &Path) {
+    let proc = Path::new("/proc");
+    if !proc.join("self").exists() {
+        return;
+    }
+    let Ok(entries) = std::fs::read_dir(dir) else {
+        return;
+    };
+    for e in entries.flatten() {
+        let name = e.file_name().to_string_lossy().into_owned();
+        if !(name.starts_with('.') && name.ends_with(".tmp")) {
+            continue;
+        }
+        let parts: Vec<&str> = name.split('.').collect();
+        let Some(pid) = parts
+            .len()
+            .checked_sub(3)
+            .and_then(|i| parts[i].parse::<u32>().ok())
+        else {
+            continue;
+        };
+        if !proc.join(pid.to_string()).exists() {
+            let _ = std::fs::remove_file(e.path());
+        }
+    }
+}
+
+/// An exclusive lock on `out/.locks/NAME.lock`, held until the file is
+/// dropped (the system releases it when the process ends, killed or not):
+/// waiting for it with `wait`, else `None` when another process holds it.
+fn lock(out: &Path, name: &str, wait: bool) -> Result<Option<std::fs::File>, Failure> {
+    let dir = out.join(".locks");
+    let fail = |e: std::io::Error, p: &Path| runtime(anyhow::anyhow!("{}: {e}", p.display()));
+    std::fs::create_dir_all(&dir).map_err(|e| fail(e, &dir))?;
+    let path = dir.join(format!("{name}.lock"));
+    let file = std::fs::OpenOptions::new()
+        .create(true)
+        .truncate(false)
+        .write(true)
+        .open(&path)
+        .map_err(|e| fail(e, &path))?;
+    if wait {
+        file.lock().map_err(|e| fail(e, &path))?;
+        return Ok(Some(file));
+    }
+    match file.try_lock() {
+        Ok(()) => Ok(Some(file)),
+        Err(std::fs::TryLockError::WouldBlock) => Ok(None),
+        Err(std::fs::TryLockError::Error(e)) => Err(fail(e, &path)),
+    }
+}
+
 /// report.jsonl: the JSON line of every finished pair of the whole file
-/// (all shards), in the file's order; rewritten atomically.
+/// (all shards), in the file's order; rewritten atomically, under a lock,
+/// so that of batches running side by side on one folder the last to
+/// finish writes every line (each pair's JSON file is written before its
+/// batch writes the report).
 fn write_report(args: &BatchArgs, all: &[Pair]) -> Result<(), Failure> {
+    let _lock = lock(&args.out, "report", true)?;
     let mut text = String::new();
     for p in all {
         let f = args.out.join(format!("{}_{}.json", p.a, p.b));
