@@ -9,7 +9,7 @@ fn data_dir() -> Option<std::path::PathBuf> {
 #[test]
 fn faust_mesh_spectrum() {
     let Some(dir) = data_dir() else {
-        eprintln!("skipped: FAUST data not found (set FMAPS_DATA to the datasets directory)");
+        fmaps_tests::missing_data("FAUST (bcicp/FAUST/vtx_5k)");
         return;
     };
     let mesh = fmaps::mesh_io::read_mesh(dir.join("bcicp/FAUST/vtx_5k/tr_reg_000.off")).unwrap();

@@ -24,6 +24,20 @@ pub fn data_dir(probe: &str) -> Option<PathBuf> {
     dir.join(probe).exists().then_some(dir)
 }
 
+/// A benchmark dataset a test needs is missing: a note past the test
+/// harness's capture (a passing run shows the skip), or a failure when
+/// `FMAPS_REQUIRE_DATA` is set (CI, where the data is present).
+pub fn missing_data(what: &str) {
+    if std::env::var_os("FMAPS_REQUIRE_DATA").is_some_and(|v| !v.is_empty() && v != "0") {
+        panic!("{what} not found, and FMAPS_REQUIRE_DATA is set");
+    }
+    use std::io::Write as _;
+    let _ = writeln!(
+        std::io::stderr(),
+        "note: skipped, {what} not found (set FMAPS_DATA)"
+    );
+}
+
 /// The repository README's Rust example, compiled as a doctest (it reads
 /// files a user downloads, so it is built, not run).
 #[cfg(doctest)]

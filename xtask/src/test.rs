@@ -1,6 +1,7 @@
 //! `cargo xtask test`: every test of the workspace (unit, integration,
 //! doc tests, the cross-crate tests in `tests/` and its tidy tests), then
-//! the nearest-neighbour tests again without matrix tiles
+//! the tests of the ball search and the tiles (nearest, refine, solve)
+//! again without matrix tiles
 //! (`FMAPS_NO_AMX=1`), so that the paths of CPUs without AMX run on an AMX
 //! machine too.
 
@@ -51,7 +52,18 @@ pub fn test(args: &Args) -> anyhow::Result<()> {
         all.extend(["--features", f]);
     }
     cargo(&all, &[])?;
-    cargo(&["test", "-p", "fmaps-nearest"], &[("FMAPS_NO_AMX", "1")])
+    cargo(
+        &[
+            "test",
+            "-p",
+            "fmaps-nearest",
+            "-p",
+            "fmaps-refine",
+            "-p",
+            "fmaps-solve",
+        ],
+        &[("FMAPS_NO_AMX", "1")],
+    )
 }
 
 /// Options of `cargo xtask fuzz`.

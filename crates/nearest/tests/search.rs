@@ -160,7 +160,11 @@ fn default_ball_clusters_follow_the_policy() {
         ..
     } = PartitionParams::default();
     if std::env::var_os("FMAPS_NO_BALLS").is_some() {
-        eprintln!("note: default_ball_clusters_follow_the_policy: skipped, FMAPS_NO_BALLS is set");
+        use std::io::Write as _;
+        let _ = writeln!(
+            std::io::stderr(),
+            "note: default_ball_clusters_follow_the_policy: skipped, FMAPS_NO_BALLS is set"
+        );
         return;
     }
     let b = grid_basis(48, 24, 150);
