@@ -516,3 +516,43 @@ fn native(set: impl FnOnce(&mut NativeParams)) -> NativeParams {
     set(&mut p);
     p
 }
+
+/// The native solver gives the same eigenpairs, bit for bit, on 1 and 4
+/// threads with its default (simplicial) factorization: no reduction's
+/// order depends on the thread count. The supernodal factorization's
+/// parallel kernels sum in another order: the same to rounding.
+#[test]
+fn native_results_do_not_depend_on_the_thread_count() {
+    let mesh = translated(&torus(1.0, 0.35, 48, 20), [0.1, -0.2, 0.3]).unwrap();
+    let o = op(&mesh);
+    for factorization in [
+        fmaps_eigensolve::Factorization::Auto,
+        fmaps_eigensolve::Factorization::Simplicial,
+        fmaps_eigensolve::Factorization::Supernodal,
+    ] {
+        let on = |threads: usize| {
+            let s = NativeSolver::new(native(|p| {
+                p.threads = threads;
+                p.factorization = factorization;
+            }));
+            solve(&s, &o, 30)
+        };
+        let (one, four) = (on(1), on(4));
+        if factorization == fmaps_eigensolve::Factorization::Supernodal {
+            for (a, b) in one.eigenvalues.iter().zip(four.eigenvalues.iter()) {
+                assert!((a - b).abs() <= 1e-12 * b.abs().max(1.0), "{a} vs {b}");
+            }
+            continue;
+        }
+        assert_eq!(
+            one.eigenvalues.as_slice(),
+            four.eigenvalues.as_slice(),
+            "{factorization:?}"
+        );
+        assert_eq!(
+            one.eigenvectors.as_slice(),
+            four.eigenvectors.as_slice(),
+            "{factorization:?}"
+        );
+    }
+}
