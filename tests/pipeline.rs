@@ -67,10 +67,13 @@ fn a_permuted_copy_is_matched_to_the_true_vertices() {
     let r = match_shapes(&a, &b, &small_params()).unwrap();
     assert_eq!(r.t_ab.len(), n);
     let exact = (0..n).filter(|&x| r.t_ab[x] == inv[x]).count();
-    assert!(exact as f64 > 0.95 * n as f64, "{exact} of {n} exact");
-    // An isometry: C is close to orthonormal and commutes with Δ.
-    assert!(r.metrics.orthonormality < 0.5, "{:?}", r.metrics);
-    assert!(r.metrics.laplacian_commutativity < 0.05, "{:?}", r.metrics);
+    assert_eq!(exact, n, "{exact} of {n} exact");
+    // A permuted copy has the same spectrum and the permuted
+    // eigenfunctions (up to sign): the exact C is diagonal with entries
+    // ±1, orthonormal and commuting with Δ to the eigensolver's rounding
+    // (measured 3e-10 and 8e-12).
+    assert!(r.metrics.orthonormality < 1e-6, "{:?}", r.metrics);
+    assert!(r.metrics.laplacian_commutativity < 1e-8, "{:?}", r.metrics);
     assert_eq!(r.c_ba.shape(), (20, 20));
     assert_eq!(r.t_ab_init, r.t_ab);
     // A near-exact map preserves orientation.
@@ -358,7 +361,7 @@ fn refining_a_given_map() {
     let wrong = |t: &[usize]| t.iter().zip(&pair.truth).filter(|(x, y)| x != y).count();
     let r = refine_point_map(&pa, &pb, &pair.truth, &params).unwrap();
     assert!(
-        wrong(&r.t_ab) * 50 < n,
+        wrong(&r.t_ab) * 100 <= n,
         "{} of {n} moved off the truth",
         wrong(&r.t_ab)
     );
@@ -375,7 +378,12 @@ fn refining_a_given_map() {
     let before = wrong(&noisy);
     let r = refine_point_map(&pa, &pb, &noisy, &params).unwrap();
     let after = wrong(&r.t_ab);
-    assert!(after * 5 < before, "{before} wrong before, {after} after");
+    // A fifth of the vertices sent anywhere (129 wrong): the refinement
+    // recovers all but a few (measured: 1).
+    assert!(
+        after * 100 <= n && after * 20 < before,
+        "{before} wrong before, {after} after"
+    );
     // No refinement: the given map back, with its pull-back.
     let mut none = params.clone();
     none.refinement = Refinement::None;

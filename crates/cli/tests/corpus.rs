@@ -403,6 +403,10 @@ fn nasty_meshes_through_every_subcommand() {
             "match-source",
             "match-target",
             "geodesic",
+            "geodesic-heat",
+            "eval",
+            "refine-target",
+            "render-embedding",
         ] {
             assert_eq!(code_of(&format!("{cmd} {bad}")), Some(2), "{cmd} {bad}");
         }
