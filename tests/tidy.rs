@@ -253,6 +253,68 @@ fn manifests_follow_the_workspace_conventions() {
     assert!(bad.is_empty(), "{bad:?}");
 }
 
+/// The dependency names of a manifest's `[*dependencies]` tables, each
+/// with whether it is taken from `[workspace.dependencies]`.
+fn dependencies(manifest: &str) -> Vec<(String, bool)> {
+    let mut out = Vec::new();
+    let mut in_deps = false;
+    for line in manifest.lines().map(str::trim) {
+        if line.starts_with('[') {
+            in_deps = line.ends_with("dependencies]");
+            continue;
+        }
+        if !in_deps || line.starts_with('#') {
+            continue;
+        }
+        if let Some((key, value)) = line.split_once('=') {
+            let name = key.trim().split('.').next().unwrap_or("").to_string();
+            let workspace = key.contains(".workspace") || value.contains("workspace = true");
+            out.push((name, workspace));
+        }
+    }
+    out
+}
+
+/// A dependency of more than one package comes from
+/// `[workspace.dependencies]` (one version for all); the exceptions are
+/// path-only development dependencies that must stay off the registry
+/// (mesh-io's tests on fmaps-shapes, which builds on mesh-io; eval's tests
+/// on itself with a feature).
+#[test]
+fn shared_dependencies_come_from_the_workspace() {
+    const PATH_ONLY: [(&str, &str); 2] = [
+        ("crates/mesh-io/Cargo.toml", "fmaps-shapes"),
+        ("crates/eval/Cargo.toml", "fmaps-eval"),
+    ];
+    let mut manifests: Vec<String> = crate_dirs()
+        .iter()
+        .map(|d| format!("crates/{d}/Cargo.toml"))
+        .collect();
+    manifests.extend(["xtask/Cargo.toml".into(), "tests/Cargo.toml".into()]);
+    let mut users: std::collections::BTreeMap<String, Vec<(String, bool)>> = Default::default();
+    for m in &manifests {
+        for (name, workspace) in dependencies(&read(m)) {
+            users.entry(name).or_default().push((m.clone(), workspace));
+        }
+    }
+    assert!(
+        users.contains_key("rayon"),
+        "the manifest reader found nothing"
+    );
+    let mut bad = Vec::new();
+    for (name, uses) in &users {
+        if uses.len() < 2 {
+            continue;
+        }
+        for (m, workspace) in uses {
+            if !workspace && !PATH_ONLY.contains(&(m.as_str(), name.as_str())) {
+                bad.push(format!("{m}: {name} (used by {} packages)", uses.len()));
+            }
+        }
+    }
+    assert!(bad.is_empty(), "not from [workspace.dependencies]: {bad:?}");
+}
+
 #[test]
 fn library_code_names_no_path_outside_the_repository() {
     let mut bad = Vec::new();
