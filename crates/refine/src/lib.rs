@@ -90,7 +90,8 @@ pub use orientation::{area_distortion, orientation_score};
 pub use repair::Repair;
 pub use sampling::{farthest_point_sampling, farthest_point_sampling_with_nearest};
 pub use shells::{Select, SmoothShells};
-pub use zoomout::{Subsample, ZoomOut, search_cells};
+pub(crate) use zoomout::search_cells;
+pub use zoomout::{Subsample, ZoomOut};
 
 /// Errors of this crate.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]

@@ -45,11 +45,7 @@ pub struct Subsample {
 /// (rows per cluster about `√(n/5)`): on FAUST's 80k pair, 635 cells of
 /// ~126 rows, which search faster than the 5000 samples' cells of ~16
 /// (docs/benchmarks.md, "Large meshes: sampled refinement").
-///
-/// ```
-/// assert_eq!(fmaps_refine::search_cells(80_000), 635);
-/// ```
-pub fn search_cells(n: usize) -> usize {
+pub(crate) fn search_cells(n: usize) -> usize {
     n.div_ceil(fmaps_nearest::PartitionParams::default().coarse_ball_size(n))
         .max(1)
 }
@@ -660,4 +656,14 @@ pub(crate) fn balls_partition_steps(
         r.view(r.k()),
         fmaps_nearest::BallsRequest::new(BALLS_MIN_ROWS).kmeans_steps(steps),
     )
+}
+
+#[cfg(test)]
+mod tests {
+    /// FAUST's 80k pair: 635 cells of about 126 rows.
+    #[test]
+    fn search_cells_of_a_large_shape() {
+        assert_eq!(super::search_cells(80_000), 635);
+        assert_eq!(super::search_cells(1), 1);
+    }
 }
