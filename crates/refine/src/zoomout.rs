@@ -36,7 +36,8 @@ pub struct Subsample {
     /// empty. Where the final search bounds clusters of A's rows by balls,
     /// these patches are its clusters (else k-means clusters of the rows
     /// are computed). [`Subsample::farthest`] gives each vertex's nearest
-    /// among the first [`search_cells`] samples.
+    /// among the first `n / PartitionParams::coarse_ball_size(n)` samples
+    /// (rows per patch about `√(n/5)`).
     pub nearest_a: Vec<usize>,
 }
 

@@ -1,0 +1,54 @@
+//! Deep functional maps for fmaps: the learned side of shape matching
+//! (Litany et al. 2017 onwards). A network learns per-vertex features, a
+//! differentiable layer solves the functional map from them, and losses on
+//! the map train the network without labels.
+//!
+//! This crate holds what DiffusionNet (Sharp, Attaiki, Crane, Ovsjanikov,
+//! ToG 2022), the feature extractor of the field's current methods, needs
+//! of each shape, computed once per mesh from the workspace's Laplacian
+//! and eigensolver ([`ShapeOperators`]): the lumped mass and the first k
+//! eigenpairs for the learned spectral diffusion, a tangent frame per
+//! vertex and the sparse gradient operators for the spatial gradient
+//! features.
+//!
+//! ```
+//! use fmaps_learn::ShapeOperators;
+//!
+//! let mesh = fmaps_shapes::icosphere(1.0, 2);
+//! let ops = ShapeOperators::compute(&mesh, 16)?;
+//! // The frames are orthonormal; the normals of a sphere point outwards.
+//! let f = ops.frames[0];
+//! let p = mesh.vertices()[0];
+//! let outward: f64 = (0..3).map(|c| f.normal[c] * p[c]).sum();
+//! assert!(outward > 0.99);
+//! # Ok::<(), fmaps_learn::Error>(())
+//! ```
+#![deny(missing_docs)]
+#![forbid(unsafe_code)]
+
+pub mod operators;
+
+pub use operators::{Frame, ShapeOperators};
+
+/// Errors of this crate.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum Error {
+    /// A parameter is out of range.
+    #[error("invalid parameter: {0}")]
+    Parameter(String),
+    /// The mesh has a vertex the operators cannot be built at.
+    #[error("vertex {vertex}: {problem}")]
+    Mesh {
+        /// The vertex (0-based).
+        vertex: usize,
+        /// What is wrong.
+        problem: String,
+    },
+    /// The eigensolver failed.
+    #[error("eigenbasis: {0}")]
+    Eigen(#[from] fmaps_eigensolve::Error),
+}
+
+/// Result alias of this crate.
+pub type Result<T, E = Error> = std::result::Result<T, E>;

@@ -1,0 +1,276 @@
+//! DiffusionNet's per-shape operators (Sharp, Attaiki, Crane, Ovsjanikov,
+//! "DiffusionNet: Discretization Agnostic Learning on Surfaces", ToG
+//! 2022, section 3 and its supplement): what the network needs of a mesh,
+//! computed once (they depend on the mesh only):
+//!
+//! - the lumped mass `M` and the first `k` eigenpairs of the cotangent
+//!   Laplacian (`L φ = λ M φ`), for the learned diffusion in the spectral
+//!   domain;
+//! - a tangent frame per vertex (X, Y, normal);
+//! - the gradient operators `G_X`, `G_Y` (n x n, sparse): for a function
+//!   `f` on the vertices, `(G_X f)_i + i (G_Y f)_i` is its gradient at
+//!   vertex `i` in the frame's coordinates, fitted by least squares to the
+//!   differences along the vertex's edges.
+//!
+//! The frames and the least-squares fit follow the paper's reference
+//! implementation: the vertex normal is the normalised sum of the unit
+//! normals of the incident faces; X is the world axis x (or y, where the
+//! normal is within `acos 0.9` of x) projected onto the tangent plane and
+//! normalised, Y = normal × X; each vertex's gradient minimises
+//! `Σ_j (g · e_ij − (f_j − f_i))² + ε |g|²` over its neighbours j, with
+//! `e_ij` the edge vector in the frame and ε = 1e-5 ([`GRAD_REGULARIZATION`]).
+
+use fmaps_eigensolve::{EigenProblem, EigenSolver, NativeSolver};
+use fmaps_laplacian::{LaplacianParams, MassKind, cotan_laplacian};
+use fmaps_mesh_io::TriMesh;
+use fmaps_mesh_io::vec3::{cross, dot, sub};
+use nalgebra::{DMatrix, DVector};
+use sprs::{CsMat, TriMat};
+
+use crate::{Error, Result};
+
+/// The ridge term ε of each vertex's least-squares gradient fit (as in
+/// the reference implementation): keeps the 2 x 2 normal equations
+/// invertible at vertices whose edges are (nearly) collinear.
+pub const GRAD_REGULARIZATION: f64 = 1e-5;
+
+/// An orthonormal frame at a vertex: two tangent directions and the unit
+/// normal, `y = normal × x`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Frame {
+    /// First tangent direction.
+    pub x: [f64; 3],
+    /// Second tangent direction.
+    pub y: [f64; 3],
+    /// Unit normal.
+    pub normal: [f64; 3],
+}
+
+/// The operators DiffusionNet needs of one shape.
+#[derive(Debug, Clone)]
+pub struct ShapeOperators {
+    /// Lumped (barycentric) vertex areas, the diagonal of `M`.
+    pub mass: DVector<f64>,
+    /// The first `k` eigenvalues of `L φ = λ M φ`, ascending.
+    pub eigenvalues: DVector<f64>,
+    /// The eigenvectors (n x k), M-orthonormal.
+    pub eigenvectors: DMatrix<f64>,
+    /// A tangent frame per vertex.
+    pub frames: Vec<Frame>,
+    /// X components of the gradient (n x n, CSR).
+    pub grad_x: CsMat<f64>,
+    /// Y components of the gradient (n x n, CSR).
+    pub grad_y: CsMat<f64>,
+}
+
+impl ShapeOperators {
+    /// The operators of `mesh` with `k` eigenpairs (DiffusionNet's
+    /// default: 128).
+    ///
+    /// Errors: `k` not below the vertex count, a vertex without a normal
+    /// (in no face, or in degenerate faces only), the eigensolver's.
+    ///
+    /// ```
+    /// let mesh = fmaps_shapes::icosphere(1.0, 2);
+    /// let ops = fmaps_learn::ShapeOperators::compute(&mesh, 16)?;
+    /// assert_eq!(ops.eigenvectors.shape(), (mesh.n_vertices(), 16));
+    /// // A constant has no gradient: every row sums to zero.
+    /// for row in ops.grad_x.outer_iterator().chain(ops.grad_y.outer_iterator()) {
+    ///     assert!(row.iter().map(|(_, v)| v).sum::<f64>().abs() < 1e-9);
+    /// }
+    /// # Ok::<(), fmaps_learn::Error>(())
+    /// ```
+    pub fn compute(mesh: &TriMesh, k: usize) -> Result<ShapeOperators> {
+        let n = mesh.n_vertices();
+        if k == 0 || k >= n {
+            return Err(Error::Parameter(format!(
+                "{k} eigenpairs of a mesh of {n} vertices: expected 1 <= k < {n}"
+            )));
+        }
+        let normals = vertex_normals(mesh)?;
+        let frames = tangent_frames(&normals);
+        let (grad_x, grad_y) = gradient_operators(mesh.vertices(), &edges(mesh), &frames);
+        let op = cotan_laplacian(mesh, &LaplacianParams::with_mass(MassKind::Lumped));
+        let problem = EigenProblem::new(op.stiffness.view(), &op.mass)?;
+        let basis = NativeSolver::default().solve(&problem, k)?;
+        Ok(ShapeOperators {
+            mass: basis.mass,
+            eigenvalues: basis.eigenvalues,
+            eigenvectors: basis.eigenvectors,
+            frames,
+            grad_x,
+            grad_y,
+        })
+    }
+}
+
+/// Unit vertex normals: the normalised sum of the unit normals of the
+/// faces around each vertex (degenerate faces left out).
+///
+/// Errors: a vertex in no face or in degenerate faces only, or whose
+/// faces' normals cancel.
+pub fn vertex_normals(mesh: &TriMesh) -> Result<Vec<[f64; 3]>> {
+    let v = mesh.vertices();
+    let mut sum = vec![[0.0; 3]; v.len()];
+    for f in mesh.faces() {
+        let n = cross(sub(v[f[1]], v[f[0]]), sub(v[f[2]], v[f[0]]));
+        let len = dot(n, n).sqrt();
+        if !(len > 0.0 && len.is_finite()) {
+            continue;
+        }
+        for &i in f {
+            for c in 0..3 {
+                sum[i][c] += n[c] / len;
+            }
+        }
+    }
+    sum.into_iter()
+        .enumerate()
+        .map(|(i, s)| {
+            let len = dot(s, s).sqrt();
+            if len > 1e-12 {
+                Ok(s.map(|c| c / len))
+            } else {
+                Err(Error::Mesh {
+                    vertex: i,
+                    problem: "it has no normal: it is in no face, in degenerate faces only, or its faces' normals cancel".into(),
+                })
+            }
+        })
+        .collect()
+}
+
+/// A frame per unit normal: X is the world axis x projected onto the
+/// tangent plane (the axis y where `|normal · x| >= 0.9`), normalised;
+/// `Y = normal × X`.
+pub fn tangent_frames(normals: &[[f64; 3]]) -> Vec<Frame> {
+    normals
+        .iter()
+        .map(|&n| {
+            let axis = if n[0].abs() < 0.9 {
+                [1.0, 0.0, 0.0]
+            } else {
+                [0.0, 1.0, 0.0]
+            };
+            let d = dot(axis, n);
+            let t = [axis[0] - d * n[0], axis[1] - d * n[1], axis[2] - d * n[2]];
+            let len = dot(t, t).sqrt();
+            let x = t.map(|c| c / len);
+            Frame {
+                x,
+                y: cross(n, x),
+                normal: n,
+            }
+        })
+        .collect()
+}
+
+/// The neighbours of every vertex along the mesh's edges, ascending.
+pub fn edges(mesh: &TriMesh) -> Vec<Vec<usize>> {
+    let mut nb = vec![Vec::new(); mesh.n_vertices()];
+    for f in mesh.faces() {
+        for k in 0..3 {
+            let (a, b) = (f[k], f[(k + 1) % 3]);
+            if a != b {
+                nb[a].push(b);
+                nb[b].push(a);
+            }
+        }
+    }
+    for l in &mut nb {
+        l.sort_unstable();
+        l.dedup();
+    }
+    nb
+}
+
+/// The gradient operators `(G_X, G_Y)` for vertices `vertices`, each
+/// vertex's neighbours `neighbours` and frames `frames` (see the module
+/// docs): row i holds, for each neighbour j, the coefficients of `f_j`,
+/// and at i minus their sum, so a constant has zero gradient exactly. A
+/// vertex without neighbours has a zero row.
+pub fn gradient_operators(
+    vertices: &[[f64; 3]],
+    neighbours: &[Vec<usize>],
+    frames: &[Frame],
+) -> (CsMat<f64>, CsMat<f64>) {
+    let n = vertices.len();
+    let nnz: usize = neighbours.iter().map(|l| l.len() + 1).sum();
+    let (mut gx, mut gy) = (
+        TriMat::with_capacity((n, n), nnz),
+        TriMat::with_capacity((n, n), nnz),
+    );
+    for (i, nb) in neighbours.iter().enumerate() {
+        if nb.is_empty() {
+            continue;
+        }
+        let fr = &frames[i];
+        // The edge vectors in the frame: the rows of A.
+        let a: Vec<[f64; 2]> = nb
+            .iter()
+            .map(|&j| {
+                let e = sub(vertices[j], vertices[i]);
+                [dot(e, fr.x), dot(e, fr.y)]
+            })
+            .collect();
+        // (AᵀA + εI)⁻¹, 2 x 2.
+        let (mut s00, mut s01, mut s11) = (GRAD_REGULARIZATION, 0.0, GRAD_REGULARIZATION);
+        for r in &a {
+            s00 += r[0] * r[0];
+            s01 += r[0] * r[1];
+            s11 += r[1] * r[1];
+        }
+        let det = s00 * s11 - s01 * s01;
+        let inv = [[s11 / det, -s01 / det], [-s01 / det, s00 / det]];
+        let (mut sum_x, mut sum_y) = (0.0, 0.0);
+        for (r, &j) in a.iter().zip(nb) {
+            // Column j of (AᵀA + εI)⁻¹ Aᵀ.
+            let cx = inv[0][0] * r[0] + inv[0][1] * r[1];
+            let cy = inv[1][0] * r[0] + inv[1][1] * r[1];
+            gx.add_triplet(i, j, cx);
+            gy.add_triplet(i, j, cy);
+            sum_x += cx;
+            sum_y += cy;
+        }
+        gx.add_triplet(i, i, -sum_x);
+        gy.add_triplet(i, i, -sum_y);
+    }
+    (gx.to_csr(), gy.to_csr())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Frames are orthonormal and right-handed, with X from the world x
+    /// axis except near it.
+    #[test]
+    fn frames_are_orthonormal_and_right_handed() {
+        let normals: Vec<[f64; 3]> = [
+            [0.0, 0.0, 1.0],
+            [1.0, 0.0, 0.0],
+            [0.6, 0.0, 0.8],
+            [0.95, 0.3122498999199199, 0.0],
+        ]
+        .to_vec();
+        for (n, f) in normals.iter().zip(tangent_frames(&normals)) {
+            for (u, v, want) in [
+                (f.x, f.x, 1.0),
+                (f.y, f.y, 1.0),
+                (f.normal, f.normal, 1.0),
+                (f.x, f.y, 0.0),
+                (f.x, f.normal, 0.0),
+                (f.y, f.normal, 0.0),
+            ] {
+                assert!((dot(u, v) - want).abs() < 1e-12, "{n:?}");
+            }
+            // Right-handed: x × y = normal.
+            let z = cross(f.x, f.y);
+            assert!((dot(z, f.normal) - 1.0).abs() < 1e-12);
+        }
+        // The normal (0, 0, 1) keeps X = world x; (1, 0, 0) takes y.
+        let f = tangent_frames(&normals);
+        assert_eq!(f[0].x, [1.0, 0.0, 0.0]);
+        assert_eq!(f[1].x, [0.0, 1.0, 0.0]);
+    }
+}
