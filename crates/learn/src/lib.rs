@@ -48,6 +48,9 @@ pub enum Error {
     /// The eigensolver failed.
     #[error("eigenbasis: {0}")]
     Eigen(#[from] fmaps_eigensolve::Error),
+    /// A cache file could not be written.
+    #[error("{0}")]
+    File(#[from] fmaps_mesh_io::Error),
 }
 
 /// Result alias of this crate.

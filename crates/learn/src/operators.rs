@@ -27,6 +27,8 @@ use fmaps_mesh_io::vec3::{cross, dot, sub};
 use nalgebra::{DMatrix, DVector};
 use sprs::{CsMat, TriMat};
 
+use fmaps_mesh_io::operators::{OperatorsFile, SparseRows, read_operators, write_operators};
+
 use crate::{Error, Result};
 
 /// The ridge term ε of each vertex's least-squares gradient fit (as in
@@ -101,6 +103,108 @@ impl ShapeOperators {
             grad_x,
             grad_y,
         })
+    }
+}
+
+impl ShapeOperators {
+    /// The cache key of `mesh`'s operators with `k` eigenpairs: the sizes,
+    /// a 64-bit FNV-1a hash of the coordinates' and faces' bits, and the
+    /// operators' version.
+    pub fn key(mesh: &TriMesh, k: usize) -> String {
+        let mut h: u64 = 0xcbf29ce484222325;
+        let mut eat = |x: u64| {
+            for b in x.to_le_bytes() {
+                h ^= u64::from(b);
+                h = h.wrapping_mul(0x100000001b3);
+            }
+        };
+        for p in mesh.vertices() {
+            p.iter().for_each(|c| eat(c.to_bits()));
+        }
+        for f in mesh.faces() {
+            f.iter().for_each(|&i| eat(i as u64));
+        }
+        format!(
+            "diffusionnet-operators-1 n={} faces={} k={k} hash={h:016x}",
+            mesh.n_vertices(),
+            mesh.n_faces()
+        )
+    }
+
+    /// The operators as a cache file ([`fmaps_mesh_io::operators`]) under
+    /// `key`.
+    pub fn to_file(&self, key: String) -> OperatorsFile {
+        let sparse = |m: &CsMat<f64>| SparseRows {
+            indptr: m.indptr().raw_storage().to_vec(),
+            indices: m.indices().to_vec(),
+            data: m.data().to_vec(),
+        };
+        OperatorsFile {
+            key,
+            mass: self.mass.as_slice().to_vec(),
+            eigenvalues: self.eigenvalues.as_slice().to_vec(),
+            eigenvectors: self.eigenvectors.as_slice().to_vec(),
+            frames: self
+                .frames
+                .iter()
+                .map(|f| std::array::from_fn(|i| [f.x, f.y, f.normal][i / 3][i % 3]))
+                .collect(),
+            grad_x: sparse(&self.grad_x),
+            grad_y: sparse(&self.grad_y),
+        }
+    }
+
+    /// The operators of a cache file (checked by its reader).
+    ///
+    /// Errors: a sparse structure `sprs` refuses (unsorted columns).
+    pub fn from_file(f: OperatorsFile) -> Result<ShapeOperators> {
+        let (n, k) = (f.n(), f.k());
+        let sparse = |name: &str, m: SparseRows| {
+            CsMat::try_new((n, n), m.indptr, m.indices, m.data)
+                .map_err(|(_, _, _, e)| Error::Parameter(format!("{name}: {e}")))
+        };
+        Ok(ShapeOperators {
+            eigenvectors: DMatrix::from_vec(n, k, f.eigenvectors),
+            mass: DVector::from_vec(f.mass),
+            eigenvalues: DVector::from_vec(f.eigenvalues),
+            frames: f
+                .frames
+                .iter()
+                .map(|r| Frame {
+                    x: [r[0], r[1], r[2]],
+                    y: [r[3], r[4], r[5]],
+                    normal: [r[6], r[7], r[8]],
+                })
+                .collect(),
+            grad_x: sparse("grad_x", f.grad_x)?,
+            grad_y: sparse("grad_y", f.grad_y)?,
+        })
+    }
+
+    /// [`compute`](Self::compute) through the cache file `path`: read
+    /// when it holds this mesh's operators with `k` eigenpairs (its key,
+    /// [`key`](Self::key), matches), else computed and written there
+    /// (atomically). A damaged or foreign file is recomputed, never
+    /// trusted. Returns the operators and whether they came from the file.
+    ///
+    /// Errors: [`compute`](Self::compute)'s, and a file that cannot be
+    /// written.
+    pub fn cached(
+        mesh: &TriMesh,
+        k: usize,
+        path: &std::path::Path,
+    ) -> Result<(ShapeOperators, bool)> {
+        let key = ShapeOperators::key(mesh, k);
+        if let Ok(f) = read_operators(path)
+            && f.key == key
+            && f.n() == mesh.n_vertices()
+            && let Ok(ops) = ShapeOperators::from_file(f)
+        {
+            return Ok((ops, true));
+        }
+        let ops = ShapeOperators::compute(mesh, k)?;
+        write_operators(path, &ops.to_file(key))?;
+        Ok((ops, false))
     }
 }
 

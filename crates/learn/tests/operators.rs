@@ -116,3 +116,34 @@ fn sphere_operators_and_errors() {
         other => panic!("{other:?}"),
     }
 }
+
+/// The cache: written on the first call, read back on the second (the
+/// same operators, bit for bit), recomputed when damaged or computed for
+/// another mesh or k.
+#[test]
+fn operators_are_cached_and_damaged_files_recomputed() {
+    let dir = std::env::temp_dir().join(format!("fmaps-learn-cache-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("sphere.npz");
+    let mesh = icosphere(1.0, 2);
+    let (first, hit) = ShapeOperators::cached(&mesh, 12, &path).unwrap();
+    assert!(!hit);
+    let (again, hit) = ShapeOperators::cached(&mesh, 12, &path).unwrap();
+    assert!(hit);
+    assert_eq!(again.eigenvectors, first.eigenvectors);
+    assert_eq!(again.eigenvalues, first.eigenvalues);
+    assert_eq!(again.mass, first.mass);
+    assert_eq!(again.frames, first.frames);
+    assert_eq!(again.grad_x, first.grad_x);
+    assert_eq!(again.grad_y, first.grad_y);
+    // Another k: recomputed (and the file now holds that one).
+    let (_, hit) = ShapeOperators::cached(&mesh, 10, &path).unwrap();
+    assert!(!hit);
+    // A truncated file: recomputed.
+    let bytes = std::fs::read(&path).unwrap();
+    std::fs::write(&path, &bytes[..bytes.len() / 2]).unwrap();
+    let (ops, hit) = ShapeOperators::cached(&mesh, 10, &path).unwrap();
+    assert!(!hit);
+    assert_eq!(ops.eigenvalues.len(), 10);
+    std::fs::remove_dir_all(&dir).unwrap();
+}

@@ -53,6 +53,7 @@ pub mod npy;
 pub mod npz;
 mod obj;
 mod off;
+pub mod operators;
 mod ply;
 mod validate;
 pub mod vec3;

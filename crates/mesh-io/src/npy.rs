@@ -35,6 +35,18 @@ pub fn write_f64<W: Write>(w: &mut W, shape: &[usize], data: &[f64]) -> io::Resu
     w.write_all(&buf)
 }
 
+/// Writes an `int64` array of the given shape (column-major, as
+/// [`write_f64`]): NumPy's type for indices.
+pub fn write_i64<W: Write>(w: &mut W, shape: &[usize], data: &[i64]) -> io::Result<()> {
+    check_len(shape, data.len())?;
+    write_header(w, "<i8", shape)?;
+    let mut buf = Vec::with_capacity(data.len() * 8);
+    for x in data {
+        buf.extend_from_slice(&x.to_le_bytes());
+    }
+    w.write_all(&buf)
+}
+
 /// Writes a 1-D `uint8` array (a byte string: `bytes(np.load(...))` in
 /// Python).
 pub fn write_u8<W: Write>(w: &mut W, data: &[u8]) -> io::Result<()> {
