@@ -9,7 +9,7 @@
 //! and eigensolver ([`ShapeOperators`]): the lumped mass and the first k
 //! eigenpairs for the learned spectral diffusion, a tangent frame per
 //! vertex and the sparse gradient operators for the spatial gradient
-//! features.
+//! features; [`layers`] holds its layers with their backward passes.
 //!
 //! ```
 //! use fmaps_learn::ShapeOperators;
@@ -26,6 +26,7 @@
 #![deny(missing_docs)]
 #![forbid(unsafe_code)]
 
+pub mod layers;
 pub mod operators;
 
 pub use operators::{Frame, ShapeOperators};
