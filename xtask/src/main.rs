@@ -19,6 +19,7 @@
 #![forbid(unsafe_code)]
 
 mod bench;
+mod bench_learn;
 mod bench_match;
 mod bench_refine;
 mod descriptor_check;
@@ -63,6 +64,8 @@ enum Command {
     BenchMatch(bench_match::Args),
     /// Nearest neighbours, ICP and ZoomOut against scikit-learn, SciPy and pyFM on one pair.
     BenchRefine(bench_refine::Args),
+    /// DiffusionNet's forward and backward passes on one benchmark shape.
+    BenchLearn(bench_learn::Args),
     /// The seed paper's Figure 8 curve and Figure 1 heat maps, into docs/.
     Figures(figures::Args),
     /// Pictures of one test pair per collection (transfer, errors, C, embedding, curves), into docs/pictures/.
@@ -103,5 +106,6 @@ fn main() -> anyhow::Result<()> {
         Command::MeasureChild { args } => std::process::exit(util::measure_child(&args)?),
         Command::BenchMatch(a) => bench_match::bench_match(&a),
         Command::BenchRefine(a) => bench_refine::bench_refine(&a),
+        Command::BenchLearn(a) => bench_learn::bench_learn(&a),
     }
 }

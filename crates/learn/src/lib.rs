@@ -9,7 +9,8 @@
 //! and eigensolver ([`ShapeOperators`]): the lumped mass and the first k
 //! eigenpairs for the learned spectral diffusion, a tangent frame per
 //! vertex and the sparse gradient operators for the spatial gradient
-//! features; [`layers`] holds its layers with their backward passes.
+//! features; [`layers`] holds its layers with their backward passes and
+//! [`network`] the whole network.
 //!
 //! ```
 //! use fmaps_learn::ShapeOperators;
@@ -27,6 +28,7 @@
 #![forbid(unsafe_code)]
 
 pub mod layers;
+pub mod network;
 pub mod operators;
 
 pub use operators::{Frame, ShapeOperators};

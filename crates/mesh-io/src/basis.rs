@@ -22,7 +22,7 @@
 use std::io::Write;
 use std::path::Path;
 
-use crate::{Error, Location, Result, npy, npz};
+use crate::{Error, Result, npy, npz};
 
 /// The `format` entry of the files this version writes and reads.
 const FORMAT: &[u8] = b"fmaps-basis-2";
@@ -104,27 +104,19 @@ pub fn write_basis(path: impl AsRef<Path>, b: &BasisFile) -> Result<()> {
 /// Reads a cache file written by [`write_basis`]; any other content is a
 /// parse error naming the byte (or the entry) where it went wrong.
 pub fn read_basis(path: impl AsRef<Path>) -> Result<BasisFile> {
-    let path = path.as_ref();
-    let data = crate::read_bounded(path, MAX_BASIS_BYTES)?;
-    parse_basis(&data).map_err(|(at, message)| Error::Parse {
-        path: Some(path.to_path_buf()),
-        format: "basis cache (.npz)",
-        location: at.map_or(Location::End, Location::Byte),
-        message,
-    })
+    npz::read_file(
+        path.as_ref(),
+        MAX_BASIS_BYTES,
+        "basis cache (.npz)",
+        parse_basis,
+    )
 }
 
 /// [`read_basis`] on bytes: the error's byte offset (`None`: the whole
 /// archive or an entry's content).
 pub fn parse_basis(data: &[u8]) -> std::result::Result<BasisFile, (Option<usize>, String)> {
     let entries = npz::read_archive(data).map_err(|(at, m)| (Some(at), m))?;
-    let entry = |name: &str| {
-        entries
-            .iter()
-            .find(|e| e.name == format!("{name}.npy"))
-            .map(|e| e.data)
-            .ok_or((None, format!("no `{name}` entry: not an fmaps basis cache")))
-    };
+    let entry = |name: &str| npz::entry(&entries, name, "basis cache");
     let in_entry = |name: &'static str| {
         move |(at, m): (usize, String)| (None, format!("{name}, byte {at}: {m}"))
     };

@@ -201,6 +201,38 @@ pub fn read_archive(bytes: &[u8]) -> Result<Vec<Entry<'_>>, (usize, String)> {
     Ok(entries)
 }
 
+/// Reads the archive file `path` (at most `limit` bytes) and parses it with
+/// `parse`; its errors (a byte offset where known, and what is wrong)
+/// become parse errors of `format` naming the file.
+pub(crate) fn read_file<T>(
+    path: &std::path::Path,
+    limit: u64,
+    format: &'static str,
+    parse: impl FnOnce(&[u8]) -> Result<T, (Option<usize>, String)>,
+) -> crate::Result<T> {
+    let data = crate::read_bounded(path, limit)?;
+    parse(&data).map_err(|(at, message)| crate::Error::Parse {
+        path: Some(path.to_path_buf()),
+        format,
+        location: at.map_or(crate::Location::End, crate::Location::Byte),
+        message,
+    })
+}
+
+/// The content of the entry `name.npy` of `entries`; missing, an error
+/// saying the archive is not a `what`.
+pub(crate) fn entry<'a>(
+    entries: &[Entry<'a>],
+    name: &str,
+    what: &str,
+) -> Result<&'a [u8], (Option<usize>, String)> {
+    entries
+        .iter()
+        .find(|e| e.name == format!("{name}.npy"))
+        .map(|e| e.data)
+        .ok_or((None, format!("no `{name}` entry: not an fmaps {what}")))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -26,7 +26,7 @@ use std::io::Write;
 use std::path::Path;
 
 use crate::basis::MAX_KEY;
-use crate::{Error, Location, Result, npy, npz};
+use crate::{Error, Result, npy, npz};
 
 /// The `format` entry of the files this version writes and reads.
 const FORMAT: &[u8] = b"fmaps-operators-1";
@@ -200,14 +200,12 @@ pub fn write_operators(path: impl AsRef<Path>, f: &OperatorsFile) -> Result<()> 
 /// Errors: the file's I/O, a file over [`MAX_OPERATORS_BYTES`], and
 /// anything [`parse_operators`] refuses, naming the file.
 pub fn read_operators(path: impl AsRef<Path>) -> Result<OperatorsFile> {
-    let path = path.as_ref();
-    let bytes = crate::read_bounded(path, MAX_OPERATORS_BYTES)?;
-    parse_operators(&bytes).map_err(|(at, message)| Error::Parse {
-        path: Some(path.to_path_buf()),
-        format: "operators (.npz)",
-        location: at.map_or(Location::End, Location::Byte),
-        message,
-    })
+    npz::read_file(
+        path.as_ref(),
+        MAX_OPERATORS_BYTES,
+        "operators (.npz)",
+        parse_operators,
+    )
 }
 
 /// Parses an operators archive (see the module docs); the error gives the
