@@ -9,8 +9,9 @@
 //! and eigensolver ([`ShapeOperators`]): the lumped mass and the first k
 //! eigenpairs for the learned spectral diffusion, a tangent frame per
 //! vertex and the sparse gradient operators for the spatial gradient
-//! features; [`layers`] holds its layers with their backward passes and
-//! [`network`] the whole network.
+//! features; [`layers`] holds its layers with their backward passes,
+//! [`network`] the whole network, [`fmap_layer`] the differentiable
+//! functional-map solve and [`losses`] the unsupervised losses.
 //!
 //! ```
 //! use fmaps_learn::ShapeOperators;
@@ -27,7 +28,9 @@
 #![deny(missing_docs)]
 #![forbid(unsafe_code)]
 
+pub mod fmap_layer;
 pub mod layers;
+pub mod losses;
 pub mod network;
 pub mod operators;
 
