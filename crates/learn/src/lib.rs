@@ -11,7 +11,8 @@
 //! vertex and the sparse gradient operators for the spatial gradient
 //! features; [`layers`] holds its layers with their backward passes,
 //! [`network`] the whole network, [`fmap_layer`] the differentiable
-//! functional-map solve and [`losses`] the unsupervised losses.
+//! functional-map solve, [`losses`] the unsupervised losses and [`optim`]
+//! Adam and gradient clipping.
 //!
 //! ```
 //! use fmaps_learn::ShapeOperators;
@@ -33,6 +34,7 @@ pub mod layers;
 pub mod losses;
 pub mod network;
 pub mod operators;
+pub mod optim;
 
 pub use operators::{Frame, ShapeOperators};
 
