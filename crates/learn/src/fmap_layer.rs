@@ -2,7 +2,8 @@
 //! DUO-FMNet, Donati et al. CVPR 2022, and ULRSSM, Cao et al. SIGGRAPH
 //! 2023), differentiable.
 //!
-//! With the features of shapes A and B projected on their bases,
+//! With the features of shapes A and B projected on their bases
+//! ([`Spectrum::project`](crate::layers::Spectrum::project)),
 //! `A = Φ_Aᵀ M_A F_A` and `B = Φ_Bᵀ M_B F_B` (k x p each), the map `C`
 //! (k_B x k_A, A's coefficients to B's) minimises
 //!
@@ -16,7 +17,6 @@
 
 use nalgebra::{DMatrix, DVector};
 
-use crate::layers::Spectrum;
 use crate::{Error, Result};
 
 /// The layer's parameters.
@@ -35,25 +35,6 @@ impl Default for FmapLayer {
             gamma: 0.5,
         }
     }
-}
-
-/// Features projected on a spectral basis: `Φᵀ M F` (k x p).
-pub fn project(s: Spectrum<'_>, features: &DMatrix<f64>) -> DMatrix<f64> {
-    let mut mf = features.clone();
-    for (mut row, m) in mf.row_iter_mut().zip(s.mass.iter()) {
-        row *= *m;
-    }
-    s.eigenvectors.transpose() * mf
-}
-
-/// The gradient of [`project`]'s input for `d` = d loss / d output:
-/// `M Φ d`.
-pub fn project_backward(s: Spectrum<'_>, d: &DMatrix<f64>) -> DMatrix<f64> {
-    let mut out = s.eigenvectors * d;
-    for (mut row, m) in out.row_iter_mut().zip(s.mass.iter()) {
-        row *= *m;
-    }
-    out
 }
 
 impl FmapLayer {
@@ -163,12 +144,7 @@ fn singular() -> Error {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use fmaps_simd::SplitMix;
-
-    fn random(r: usize, c: usize, seed: u64) -> DMatrix<f64> {
-        let mut rng = SplitMix(seed);
-        DMatrix::from_fn(r, c, |_, _| rng.symmetric())
-    }
+    use crate::testing::random;
 
     fn evals(k: usize, step: f64) -> DVector<f64> {
         DVector::from_fn(k, |i, _| step * i as f64 * (1.0 + 0.1 * i as f64))

@@ -104,16 +104,28 @@ pub struct Spectrum<'a> {
     pub mass: &'a DVector<f64>,
 }
 
-impl SpectralDiffusion {
-    /// The coefficients `X̂ = Φᵀ M X` (k x C) of the input.
-    fn to_basis(s: Spectrum<'_>, x: &DMatrix<f64>) -> DMatrix<f64> {
-        let mut mx = x.clone();
-        for (mut row, m) in mx.row_iter_mut().zip(s.mass.iter()) {
+impl Spectrum<'_> {
+    /// Features projected on the basis: `Φᵀ M F` (k x p).
+    pub fn project(&self, features: &DMatrix<f64>) -> DMatrix<f64> {
+        let mut mf = features.clone();
+        for (mut row, m) in mf.row_iter_mut().zip(self.mass.iter()) {
             row *= *m;
         }
-        s.eigenvectors.transpose() * mx
+        self.eigenvectors.transpose() * mf
     }
 
+    /// The gradient of [`project`](Self::project)'s input for `d` = d
+    /// loss / d output: `M Φ d`.
+    pub fn project_backward(&self, d: &DMatrix<f64>) -> DMatrix<f64> {
+        let mut out = self.eigenvectors * d;
+        for (mut row, m) in out.row_iter_mut().zip(self.mass.iter()) {
+            row *= *m;
+        }
+        out
+    }
+}
+
+impl SpectralDiffusion {
     /// `e^{−λ_i t_c}`, k x C.
     fn coefficients(&self, s: Spectrum<'_>) -> DMatrix<f64> {
         DMatrix::from_fn(s.eigenvalues.len(), self.times.len(), |i, c| {
@@ -123,7 +135,7 @@ impl SpectralDiffusion {
 
     /// The diffused features (n x C).
     pub fn forward(&self, s: Spectrum<'_>, x: &DMatrix<f64>) -> DMatrix<f64> {
-        let spec = Self::to_basis(s, x).component_mul(&self.coefficients(s));
+        let spec = s.project(x).component_mul(&self.coefficients(s));
         s.eigenvectors * spec
     }
 
@@ -134,7 +146,7 @@ impl SpectralDiffusion {
         x: &DMatrix<f64>,
         dy: &DMatrix<f64>,
     ) -> (DMatrix<f64>, DVector<f64>) {
-        let spec = Self::to_basis(s, x);
+        let spec = s.project(x);
         let coef = self.coefficients(s);
         // Y = Φ D, D = coef ⊙ spec: dD = Φᵀ dY.
         let dd = s.eigenvectors.transpose() * dy;
@@ -144,11 +156,7 @@ impl SpectralDiffusion {
                 .sum()
         });
         // spec = Φᵀ M X: dX = M Φ dspec.
-        let mut dx = s.eigenvectors * dd.component_mul(&coef);
-        for (mut row, m) in dx.row_iter_mut().zip(s.mass.iter()) {
-            row *= *m;
-        }
-        (dx, dtimes)
+        (s.project_backward(&dd.component_mul(&coef)), dtimes)
     }
 }
 

@@ -38,6 +38,18 @@ pub mod optim;
 
 pub use operators::{Frame, ShapeOperators};
 
+/// Helpers of the unit tests.
+#[cfg(test)]
+mod testing {
+    use nalgebra::DMatrix;
+
+    /// A reproducible `r` x `c` matrix of values in [−1, 1).
+    pub(crate) fn random(r: usize, c: usize, seed: u64) -> DMatrix<f64> {
+        let mut rng = fmaps_simd::SplitMix(seed);
+        DMatrix::from_fn(r, c, |_, _| rng.symmetric())
+    }
+}
+
 /// Errors of this crate.
 #[derive(Debug, thiserror::Error)]
 #[non_exhaustive]

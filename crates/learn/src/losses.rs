@@ -48,12 +48,7 @@ pub fn laplacian_commutativity(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use fmaps_simd::SplitMix;
-
-    fn random(r: usize, c: usize, seed: u64) -> DMatrix<f64> {
-        let mut rng = SplitMix(seed);
-        DMatrix::from_fn(r, c, |_, _| rng.symmetric())
-    }
+    use crate::testing::random;
 
     fn close(analytic: f64, numeric: f64, what: &str) {
         let scale = analytic.abs().max(numeric.abs()).max(1e-8);

@@ -323,11 +323,7 @@ impl DiffusionNet {
 mod tests {
     use super::*;
     use crate::ShapeOperators;
-
-    fn random(r: usize, c: usize, seed: u64) -> DMatrix<f64> {
-        let mut rng = SplitMix(seed);
-        DMatrix::from_fn(r, c, |_, _| rng.symmetric())
-    }
+    use crate::testing::random;
 
     fn inner(a: &DMatrix<f64>, b: &DMatrix<f64>) -> f64 {
         a.component_mul(b).sum()
