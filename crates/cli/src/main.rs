@@ -22,6 +22,7 @@ mod outputs;
 mod refine_cmd;
 mod render_cmd;
 mod spectrum;
+mod train_cmd;
 
 use eval::eval;
 use geodesic::geodesic;
@@ -78,6 +79,16 @@ Defaults are the literature's automatic pipeline (pyFM's): 200 eigenpairs, 100 W
 a 50 x 50 map, weights descr 0.1, lap 1e-3 (resolvent mask), dcomm 1, orientation 1."
     )]
     Match(MatchArgs),
+    /// Train a DiffusionNet feature extractor on a collection of meshes,
+    /// unsupervised (deep functional maps: the regularised functional-map
+    /// layer, bijectivity, orthogonality and coupling losses; no ground
+    /// truth read). Resumes from its checkpoint.
+    #[command(after_help = "Examples:\n  \
+fmaps train FAUST/vtx_5k/tr_reg_00*.off --out model.npz --steps 200 --curve losses.png\n  \
+fmaps train train.txt --data meshes --out model.npz --cache ops --stop-after 50\n\n\
+A killed or stopped run continues from its checkpoint (model.checkpoint.npz by default) when\n\
+the same command runs again; the model file is written when the last step is done.")]
+    Train(Box<train_cmd::TrainArgs>),
     /// Match the pairs of a collection: resumable (finished pairs are
     /// skipped), each shape's eigenbasis computed once and cached on disk,
     /// optionally one shard of a job array; one JSON line per pair.
@@ -342,6 +353,7 @@ fn main() -> ExitCode {
         } => demo::run(&out, subdivisions, json),
         Command::Info { mesh, json } => info(&mesh, json),
         Command::Match(args) => match_cmd(&args),
+        Command::Train(args) => train_cmd::train_cmd(&args),
         Command::Batch(args) => batch::batch(&args),
         Command::Refine(args) => refine_cmd::refine_cmd(&args),
         Command::Geodesic {

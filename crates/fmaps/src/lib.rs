@@ -61,6 +61,7 @@ pub use fmaps_eigensolve as eigensolve;
 pub use fmaps_eval as eval;
 pub use fmaps_geodesic as geodesic;
 pub use fmaps_laplacian as laplacian;
+pub use fmaps_learn as learn;
 pub use fmaps_mesh_io as mesh_io;
 pub use fmaps_nearest as nearest;
 pub use fmaps_refine as refine;

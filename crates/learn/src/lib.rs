@@ -29,12 +29,15 @@
 #![deny(missing_docs)]
 #![forbid(unsafe_code)]
 
+pub mod coupling;
 pub mod fmap_layer;
 pub mod layers;
 pub mod losses;
+pub mod model;
 pub mod network;
 pub mod operators;
 pub mod optim;
+pub mod train;
 
 pub use operators::{Frame, ShapeOperators};
 
@@ -68,9 +71,37 @@ pub enum Error {
     /// The eigensolver failed.
     #[error("eigenbasis: {0}")]
     Eigen(#[from] fmaps_eigensolve::Error),
-    /// A cache file could not be written.
+    /// A mesh or cache file could not be read or written.
     #[error("{0}")]
     File(#[from] fmaps_mesh_io::Error),
+    /// The input descriptors could not be computed.
+    #[error("input features: {0}")]
+    Descriptors(#[from] fmaps_descriptors::Error),
+    /// A model or checkpoint file is not one this crate reads.
+    #[error("{}: {problem}", path.display())]
+    ModelFile {
+        /// The file.
+        path: std::path::PathBuf,
+        /// What is wrong.
+        problem: String,
+    },
+    /// A file could not be written.
+    #[error("{}: cannot write: {source}", path.display())]
+    Write {
+        /// The file.
+        path: std::path::PathBuf,
+        /// The underlying error.
+        #[source]
+        source: std::io::Error,
+    },
+    /// Training produced a loss or gradient that is not finite.
+    #[error("step {step}: the loss is not finite ({what}); the last checkpoint is kept")]
+    NonFinite {
+        /// The step (1-based).
+        step: u64,
+        /// Which value and pair.
+        what: String,
+    },
 }
 
 /// Result alias of this crate.

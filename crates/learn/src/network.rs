@@ -291,18 +291,43 @@ impl DiffusionNet {
         masks: Option<&[[DropoutMask; 2]]>,
         dy: &DMatrix<f64>,
     ) -> (DMatrix<f64>, DiffusionNetGrad) {
-        let h0 = self.first.forward(x);
-        let mut h = h0.clone();
-        let mut tapes = Vec::with_capacity(self.blocks.len());
+        let (_, tape) = self.forward_tape(shape, x, masks);
+        self.backward_tape(shape, x, &tape, dy)
+    }
+
+    /// The forward pass keeping what its backward pass needs (the
+    /// output, and the tape for [`backward_tape`](Self::backward_tape)).
+    pub fn forward_tape(
+        &self,
+        shape: ShapeInput<'_>,
+        x: &DMatrix<f64>,
+        masks: Option<&[[DropoutMask; 2]]>,
+    ) -> (DMatrix<f64>, Tape) {
+        let mut h = self.first.forward(x);
+        let mut blocks = Vec::with_capacity(self.blocks.len());
         for (i, b) in self.blocks.iter().enumerate() {
             let (out, tape) = b.forward_tape(shape, &h, masks.map(|m| m[i].clone()));
-            tapes.push(tape);
+            blocks.push(tape);
             h = out;
         }
-        let (mut d, last) = self.last.backward(&h, dy);
+        let out = self.last.forward(&h);
+        (out, Tape { blocks, last: h })
+    }
+
+    /// The backward pass of a [`forward_tape`](Self::forward_tape) on the
+    /// same shape and input `x`: d loss / d input and the parameters'
+    /// gradients for `dy` = d loss / d output.
+    pub fn backward_tape(
+        &self,
+        shape: ShapeInput<'_>,
+        x: &DMatrix<f64>,
+        tape: &Tape,
+        dy: &DMatrix<f64>,
+    ) -> (DMatrix<f64>, DiffusionNetGrad) {
+        let (mut d, last) = self.last.backward(&tape.last, dy);
         let mut blocks = Vec::with_capacity(self.blocks.len());
-        for (b, tape) in self.blocks.iter().zip(&tapes).rev() {
-            let (dx, g) = b.backward_tape(shape, tape, &d);
+        for (b, t) in self.blocks.iter().zip(&tape.blocks).rev() {
+            let (dx, g) = b.backward_tape(shape, t, &d);
             blocks.push(g);
             d = dx;
         }
@@ -316,6 +341,152 @@ impl DiffusionNet {
                 last,
             },
         )
+    }
+}
+
+/// What a training forward pass keeps for its backward pass.
+#[derive(Debug, Clone)]
+pub struct Tape {
+    blocks: Vec<BlockTape>,
+    /// The last layer's input.
+    last: DMatrix<f64>,
+}
+
+/// One parameter tensor of a network, by the name the reference
+/// implementation's PyTorch `state_dict` gives it (`first_lin.weight`,
+/// `block_0.diffusion.diffusion_time`, ...), with its shape.
+#[derive(Debug, Clone)]
+pub struct Param<'a> {
+    /// The reference's name.
+    pub name: String,
+    /// The reference's shape: `[rows, columns]` of a weight (PyTorch's
+    /// `out x in`), `[length]` of a vector.
+    pub shape: Vec<usize>,
+    /// The values, column-major (nalgebra's order).
+    pub values: &'a [f64],
+}
+
+const MLP_NAMES: [&str; 3] = [
+    "miniMLP_mlp_layer_000",
+    "miniMLP_mlp_layer_001",
+    "miniMLP_mlp_layer_002",
+];
+
+fn weight(name: String, m: &DMatrix<f64>) -> Param<'_> {
+    Param {
+        name,
+        shape: vec![m.nrows(), m.ncols()],
+        values: m.as_slice(),
+    }
+}
+
+fn vector(name: String, v: &DVector<f64>) -> Param<'_> {
+    Param {
+        name,
+        shape: vec![v.len()],
+        values: v.as_slice(),
+    }
+}
+
+impl DiffusionNet {
+    /// Input channels.
+    pub fn inputs(&self) -> usize {
+        self.first.weight.ncols()
+    }
+
+    /// Width of the blocks.
+    pub fn width(&self) -> usize {
+        self.first.weight.nrows()
+    }
+
+    /// Output channels.
+    pub fn outputs(&self) -> usize {
+        self.last.weight.nrows()
+    }
+
+    /// The parameter tensors in the fixed order of the optimiser's
+    /// groups: the first layer (weight, bias); per block the diffusion
+    /// times, `A_re`, `A_im`, the MLP's weights and biases; the last
+    /// layer.
+    pub fn params(&self) -> Vec<Param<'_>> {
+        let mut out = vec![
+            weight("first_lin.weight".into(), &self.first.weight),
+            vector("first_lin.bias".into(), &self.first.bias),
+        ];
+        for (i, b) in self.blocks.iter().enumerate() {
+            out.push(vector(
+                format!("block_{i}.diffusion.diffusion_time"),
+                &b.diffusion.times,
+            ));
+            out.push(weight(
+                format!("block_{i}.gradient_features.A_re.weight"),
+                &b.features.a_re,
+            ));
+            out.push(weight(
+                format!("block_{i}.gradient_features.A_im.weight"),
+                &b.features.a_im,
+            ));
+            for (l, name) in b.mlp.iter().zip(MLP_NAMES) {
+                out.push(weight(format!("block_{i}.mlp.{name}.weight"), &l.weight));
+                out.push(vector(format!("block_{i}.mlp.{name}.bias"), &l.bias));
+            }
+        }
+        out.push(weight("last_lin.weight".into(), &self.last.weight));
+        out.push(vector("last_lin.bias".into(), &self.last.bias));
+        out
+    }
+
+    /// The parameter tensors' values, mutable, in the order of
+    /// [`params`](Self::params).
+    pub fn params_mut(&mut self) -> Vec<&mut [f64]> {
+        let mut out: Vec<&mut [f64]> = vec![
+            self.first.weight.as_mut_slice(),
+            self.first.bias.as_mut_slice(),
+        ];
+        for b in &mut self.blocks {
+            out.push(b.diffusion.times.as_mut_slice());
+            out.push(b.features.a_re.as_mut_slice());
+            out.push(b.features.a_im.as_mut_slice());
+            for l in &mut b.mlp {
+                out.push(l.weight.as_mut_slice());
+                out.push(l.bias.as_mut_slice());
+            }
+        }
+        out.push(self.last.weight.as_mut_slice());
+        out.push(self.last.bias.as_mut_slice());
+        out
+    }
+}
+
+impl DiffusionNetGrad {
+    /// The gradients, mutable, in the order of [`DiffusionNet::params`].
+    pub fn groups_mut(&mut self) -> Vec<&mut [f64]> {
+        let mut out: Vec<&mut [f64]> = vec![
+            self.first.weight.as_mut_slice(),
+            self.first.bias.as_mut_slice(),
+        ];
+        for b in &mut self.blocks {
+            out.push(b.times.as_mut_slice());
+            out.push(b.features.a_re.as_mut_slice());
+            out.push(b.features.a_im.as_mut_slice());
+            for l in &mut b.mlp {
+                out.push(l.weight.as_mut_slice());
+                out.push(l.bias.as_mut_slice());
+            }
+        }
+        out.push(self.last.weight.as_mut_slice());
+        out.push(self.last.bias.as_mut_slice());
+        out
+    }
+
+    /// Adds `other` (the gradients of another term of the same loss).
+    pub fn add(&mut self, other: &DiffusionNetGrad) {
+        let mut theirs = other.clone();
+        for (a, b) in self.groups_mut().into_iter().zip(theirs.groups_mut()) {
+            for (x, y) in a.iter_mut().zip(b.iter()) {
+                *x += y;
+            }
+        }
     }
 }
 

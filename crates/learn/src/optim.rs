@@ -36,6 +36,18 @@ impl Adam {
         }
     }
 
+    /// The first and second moments of each parameter group (empty
+    /// before its first update).
+    pub fn moments(&self) -> &[(Vec<f64>, Vec<f64>)] {
+        &self.moments
+    }
+
+    /// Restores moments saved from [`moments`](Self::moments) (with
+    /// [`steps`](Self::steps)), to continue exactly.
+    pub fn set_moments(&mut self, moments: Vec<(Vec<f64>, Vec<f64>)>) {
+        self.moments = moments;
+    }
+
     /// Counts one step: call once per step, before updating its groups.
     pub fn begin_step(&mut self) {
         self.steps += 1;

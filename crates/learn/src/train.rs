@@ -1,0 +1,789 @@
+//! Unsupervised training of a [`Model`] on pairs of shapes, as ULRSSM
+//! (Cao, Roetzer, Bernard, SIGGRAPH 2023) trains: each step takes a
+//! random ordered pair (x, y), computes both shapes' features (with
+//! dropout), the functional maps `C_xy` and `C_yx` of the regularised
+//! layer ([`FmapLayer`]) on the first [`Recipe::fmap_eigenpairs`]
+//! eigenpairs, and the loss
+//!
+//! `w_bij · bijectivity + w_orth · orthogonality + w_lap · Laplacian
+//! commutativity + w_couple · coupling`
+//!
+//! ([`losses`], [`coupling`]); Adam with a cosine learning-rate schedule
+//! from [`Recipe::lr`] to [`Recipe::lr_min`] over [`Recipe::steps`]
+//! steps, optional gradient clipping. No ground truth is read.
+//!
+//! Everything random (the pairs, the dropout masks, the coupling loss's
+//! vertex samples) comes from one generator seeded by [`Recipe::seed`]:
+//! a run is a function of its recipe and its shapes, whatever the thread
+//! count. A [`Trainer`] saves and resumes checkpoints exactly (the
+//! parameters, Adam's moments, the generator's state, the loss history),
+//! so a run killed and resumed gives the same model as a run that was
+//! never stopped.
+
+use std::collections::BTreeMap;
+use std::path::Path;
+
+use fmaps_mesh_io::{TriMesh, npy, npz};
+use nalgebra::{DMatrix, DVector};
+use serde::{Deserialize, Serialize};
+
+use crate::coupling::{CouplingShape, coupling};
+use crate::fmap_layer::FmapLayer;
+use crate::layers::Spectrum;
+use crate::losses;
+use crate::model::{Model, NetBasis, entry, from_row_major, tensor_npy, write_entries};
+use crate::network::{DiffusionNet, DiffusionNetGrad, SplitMix};
+use crate::optim::{Adam, clip_grad_norm};
+use crate::{Error, Result, ShapeOperators};
+
+/// The checkpoint file's format name.
+pub const CHECKPOINT_FORMAT: &str = "fmaps-checkpoint";
+/// The checkpoint file's version.
+pub const CHECKPOINT_VERSION: u32 = 1;
+
+/// Weights of the loss terms.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct LossWeights {
+    /// Bijectivity (ULRSSM: 1).
+    pub bijectivity: f64,
+    /// Orthogonality (1).
+    pub orthogonality: f64,
+    /// Laplacian commutativity (0: off for near-isometric training).
+    pub laplacian: f64,
+    /// Coupling of the functional and soft point maps (1).
+    pub coupling: f64,
+}
+
+impl Default for LossWeights {
+    fn default() -> Self {
+        LossWeights {
+            bijectivity: 1.0,
+            orthogonality: 1.0,
+            laplacian: 0.0,
+            coupling: 1.0,
+        }
+    }
+}
+
+/// A training run's hyper-parameters.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[non_exhaustive]
+pub struct Recipe {
+    /// Pair steps.
+    pub steps: u64,
+    /// Initial learning rate (ULRSSM: 1e-3).
+    pub lr: f64,
+    /// Final learning rate of the cosine schedule (1e-4).
+    pub lr_min: f64,
+    /// Eigenpairs of the functional maps (ULRSSM: 200).
+    pub fmap_eigenpairs: usize,
+    /// The functional-map layer (λ = 100, γ = 0.5).
+    pub fmap: FmapLayerParams,
+    /// Temperature of the soft point maps (0.07).
+    pub tau: f64,
+    /// The loss terms' weights.
+    pub weights: LossWeights,
+    /// Vertices of each shape the coupling loss samples per step (`None`:
+    /// all).
+    pub coupling_samples: Option<usize>,
+    /// Bound on the gradients' global norm (`None`: no clipping).
+    pub clip: Option<f64>,
+    /// Seed of the initial weights and of every random draw.
+    pub seed: u64,
+}
+
+/// [`FmapLayer`]'s parameters as a recipe stores them.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct FmapLayerParams {
+    /// λ.
+    pub lambda: f64,
+    /// γ.
+    pub gamma: f64,
+}
+
+impl Default for Recipe {
+    /// ULRSSM's FAUST recipe (learning rates, layer, temperature,
+    /// weights) over 1000 steps, the coupling loss on 1000 sampled
+    /// vertices per shape.
+    fn default() -> Self {
+        let l = FmapLayer::default();
+        Recipe {
+            steps: 1000,
+            lr: 1e-3,
+            lr_min: 1e-4,
+            fmap_eigenpairs: 200,
+            fmap: FmapLayerParams {
+                lambda: l.lambda,
+                gamma: l.gamma,
+            },
+            tau: 0.07,
+            weights: LossWeights::default(),
+            coupling_samples: Some(1000),
+            clip: None,
+            seed: 1,
+        }
+    }
+}
+
+impl Recipe {
+    /// The learning rate of step `step` (0-based): cosine annealing from
+    /// `lr` to `lr_min` over `steps`.
+    pub fn lr_at(&self, step: u64) -> f64 {
+        let t = if self.steps <= 1 {
+            0.0
+        } else {
+            step.min(self.steps - 1) as f64 / (self.steps - 1) as f64
+        };
+        self.lr_min + 0.5 * (self.lr - self.lr_min) * (1.0 + (std::f64::consts::PI * t).cos())
+    }
+
+    fn layer(&self) -> FmapLayer {
+        FmapLayer {
+            lambda: self.fmap.lambda,
+            gamma: self.fmap.gamma,
+        }
+    }
+
+    fn check(&self) -> Result<()> {
+        let bad = |m: String| Err(Error::Parameter(m));
+        if self.steps == 0 {
+            return bad("0 training steps".into());
+        }
+        if !(self.lr > 0.0 && self.lr.is_finite() && self.lr_min >= 0.0 && self.lr_min <= self.lr) {
+            return bad(format!(
+                "learning rates {} -> {}: expected 0 <= lr_min <= lr",
+                self.lr, self.lr_min
+            ));
+        }
+        if self.fmap_eigenpairs < 2 {
+            return bad(format!("{} eigenpairs for the maps", self.fmap_eigenpairs));
+        }
+        if !(self.tau > 0.0 && self.tau.is_finite()) {
+            return bad(format!("temperature {}", self.tau));
+        }
+        if self.coupling_samples == Some(0) {
+            return bad("0 coupling samples".into());
+        }
+        Ok(())
+    }
+}
+
+/// A training shape: its operators, input features and bases.
+#[derive(Debug, Clone)]
+pub struct TrainShape {
+    /// Its name (file stem), for messages and checkpoints.
+    pub name: String,
+    ops: ShapeOperators,
+    input: DMatrix<f64>,
+    fmap_evals: DVector<f64>,
+    fmap_evecs: DMatrix<f64>,
+}
+
+impl TrainShape {
+    /// Prepares `mesh` for `model` and `recipe` (unit area, operators
+    /// with the larger of the two eigenpair counts, the input features).
+    pub fn new(name: &str, mesh: &TriMesh, model: &Model, recipe: &Recipe) -> Result<TrainShape> {
+        let p = model.prepare(mesh, recipe.fmap_eigenpairs)?;
+        Ok(TrainShape::from_operators(
+            name,
+            p.operators,
+            p.input,
+            recipe,
+        ))
+    }
+
+    /// From operators computed elsewhere (a cache) and the input.
+    pub fn from_operators(
+        name: &str,
+        ops: ShapeOperators,
+        input: DMatrix<f64>,
+        recipe: &Recipe,
+    ) -> TrainShape {
+        let k = recipe.fmap_eigenpairs.min(ops.eigenvalues.len());
+        TrainShape {
+            name: name.to_string(),
+            fmap_evals: ops.eigenvalues.rows(0, k).into_owned(),
+            fmap_evecs: ops.eigenvectors.columns(0, k).into_owned(),
+            ops,
+            input,
+        }
+    }
+
+    /// The shape's operators.
+    pub fn operators(&self) -> &ShapeOperators {
+        &self.ops
+    }
+
+    fn fmap_spectrum(&self) -> Spectrum<'_> {
+        Spectrum {
+            eigenvalues: &self.fmap_evals,
+            eigenvectors: &self.fmap_evecs,
+            mass: &self.ops.mass,
+        }
+    }
+}
+
+/// The loss terms of one step (weighted as in the total).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
+pub struct LossValues {
+    /// Weighted bijectivity.
+    pub bijectivity: f64,
+    /// Weighted orthogonality.
+    pub orthogonality: f64,
+    /// Weighted Laplacian commutativity.
+    pub laplacian: f64,
+    /// Weighted coupling.
+    pub coupling: f64,
+    /// Their sum.
+    pub total: f64,
+}
+
+/// What one step did.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct StepRecord {
+    /// The step (1-based).
+    pub step: u64,
+    /// The pair (indices into the shapes).
+    pub pair: (usize, usize),
+    /// The learning rate used.
+    pub lr: f64,
+    /// The losses before the update.
+    pub losses: LossValues,
+    /// The gradients' global norm before clipping.
+    pub grad_norm: f64,
+}
+
+/// The forward and backward pass of one side.
+fn side_forward(
+    net: &DiffusionNet,
+    basis: &NetBasis,
+    s: &TrainShape,
+    masks: &[[crate::network::DropoutMask; 2]],
+) -> (DMatrix<f64>, crate::network::Tape) {
+    net.forward_tape(basis.input(&s.ops), &s.input, Some(masks))
+}
+
+/// The losses of the pair (x, y) and the gradients of the network's
+/// parameters, drawing the dropout masks and the coupling samples from
+/// `rng` (x's then y's).
+pub fn pair_loss(
+    model: &Model,
+    recipe: &Recipe,
+    x: &TrainShape,
+    y: &TrainShape,
+    rng: &mut SplitMix,
+) -> Result<(LossValues, DiffusionNetGrad)> {
+    let net = &model.net;
+    let k_net = model.preprocessing.eigenpairs;
+    let (bx, by) = (NetBasis::new(&x.ops, k_net), NetBasis::new(&y.ops, k_net));
+    let masks_x = net.draw_masks(x.input.nrows(), rng);
+    let masks_y = net.draw_masks(y.input.nrows(), rng);
+    let samples_x = draw_samples(x.input.nrows(), recipe.coupling_samples, rng);
+    let samples_y = draw_samples(y.input.nrows(), recipe.coupling_samples, rng);
+    let ((fx, tape_x), (fy, tape_y)) = rayon::join(
+        || side_forward(net, &bx, x, &masks_x),
+        || side_forward(net, &by, y, &masks_y),
+    );
+    let layer = recipe.layer();
+    let (sx, sy) = (x.fmap_spectrum(), y.fmap_spectrum());
+    let (a, b) = (sx.project(&fx), sy.project(&fy));
+    let c_xy = layer.forward(&a, &b, &x.fmap_evals, &y.fmap_evals)?;
+    let c_yx = layer.forward(&b, &a, &y.fmap_evals, &x.fmap_evals)?;
+    let w = recipe.weights;
+    let mut values = LossValues::default();
+    let (bij, mut d_xy, mut d_yx) = losses::bijectivity(&c_xy, &c_yx);
+    values.bijectivity = w.bijectivity * bij;
+    d_xy *= w.bijectivity;
+    d_yx *= w.bijectivity;
+    for (c, d) in [(&c_xy, &mut d_xy), (&c_yx, &mut d_yx)] {
+        let (o, g) = losses::orthogonality(c);
+        values.orthogonality += w.orthogonality * o;
+        *d += g * w.orthogonality;
+    }
+    if w.laplacian != 0.0 {
+        for (c, d, from, to) in [
+            (&c_xy, &mut d_xy, &x.fmap_evals, &y.fmap_evals),
+            (&c_yx, &mut d_yx, &y.fmap_evals, &x.fmap_evals),
+        ] {
+            let (l, g) = losses::laplacian_commutativity(c, from, to, recipe.fmap.gamma);
+            values.laplacian += w.laplacian * l;
+            *d += g * w.laplacian;
+        }
+    }
+    let mut dfx = DMatrix::zeros(fx.nrows(), fx.ncols());
+    let mut dfy = DMatrix::zeros(fy.nrows(), fy.ncols());
+    if w.coupling != 0.0 {
+        fn side<'a>(
+            f: &'a DMatrix<f64>,
+            s: &'a TrainShape,
+            v: Option<&'a [usize]>,
+        ) -> CouplingShape<'a> {
+            CouplingShape {
+                features: f,
+                eigenvectors: &s.fmap_evecs,
+                mass: &s.ops.mass,
+                vertices: v,
+            }
+        }
+        let g = coupling(
+            &side(&fx, x, samples_x.as_deref()),
+            &side(&fy, y, samples_y.as_deref()),
+            &c_xy,
+            &c_yx,
+            recipe.tau,
+        );
+        values.coupling = w.coupling * g.loss;
+        d_xy += g.c_xy * w.coupling;
+        d_yx += g.c_yx * w.coupling;
+        dfx += g.features_x * w.coupling;
+        dfy += g.features_y * w.coupling;
+    }
+    values.total = values.bijectivity + values.orthogonality + values.laplacian + values.coupling;
+    let (da1, db1) = layer.backward(&a, &b, &x.fmap_evals, &y.fmap_evals, &d_xy)?;
+    let (db2, da2) = layer.backward(&b, &a, &y.fmap_evals, &x.fmap_evals, &d_yx)?;
+    dfx += sx.project_backward(&(da1 + da2));
+    dfy += sy.project_backward(&(db1 + db2));
+    let ((_, mut grad), (_, grad_y)) = rayon::join(
+        || net.backward_tape(bx.input(&x.ops), &x.input, &tape_x, &dfx),
+        || net.backward_tape(by.input(&y.ops), &y.input, &tape_y, &dfy),
+    );
+    grad.add(&grad_y);
+    Ok((values, grad))
+}
+
+/// `count` distinct vertices of `n` (all when `None` or at least `n`),
+/// sorted.
+fn draw_samples(n: usize, count: Option<usize>, rng: &mut SplitMix) -> Option<Vec<usize>> {
+    let count = count?;
+    if count >= n {
+        return None;
+    }
+    // Partial Fisher–Yates.
+    let mut idx: Vec<usize> = (0..n).collect();
+    for i in 0..count {
+        let j = i + (rng.next_u64() % (n - i) as u64) as usize;
+        idx.swap(i, j);
+    }
+    let mut s = idx[..count].to_vec();
+    s.sort_unstable();
+    Some(s)
+}
+
+/// A training run in progress (see the module docs).
+#[derive(Debug, Clone)]
+pub struct Trainer {
+    /// The model being trained.
+    pub model: Model,
+    /// The recipe.
+    pub recipe: Recipe,
+    /// The training shapes' names, in the order the pairs index them.
+    pub shapes: Vec<String>,
+    /// The pairs a step draws from (indices into `shapes`); empty: every
+    /// ordered pair of two different shapes.
+    pub pairs: Vec<(usize, usize)>,
+    /// Steps done.
+    pub step: u64,
+    /// One record per step done.
+    pub history: Vec<StepRecord>,
+    adam: Adam,
+    rng: SplitMix,
+}
+
+/// A checkpoint's training state (its `training` entry).
+#[derive(Debug, Clone, Serialize, Deserialize)]
+struct TrainingMeta {
+    format: String,
+    version: u32,
+    recipe: Recipe,
+    shapes: Vec<String>,
+    pairs: Vec<(usize, usize)>,
+    step: u64,
+    adam_steps: u64,
+    rng: u64,
+    history: Vec<StepRecord>,
+}
+
+impl Trainer {
+    /// A new run of `recipe` on the shapes named `shapes`, from `model`
+    /// (fresh: [`Model::new`] with the recipe's seed).
+    pub fn new(model: Model, recipe: Recipe, shapes: Vec<String>) -> Result<Trainer> {
+        recipe.check()?;
+        if shapes.len() < 2 {
+            return Err(Error::Parameter(format!(
+                "{} training shape(s): pairs need at least two",
+                shapes.len()
+            )));
+        }
+        Ok(Trainer {
+            adam: Adam::new(recipe.lr),
+            // The weights took the seed itself; the draws a derived one.
+            rng: SplitMix(recipe.seed ^ 0x5EED_DA7A),
+            model,
+            recipe,
+            shapes,
+            pairs: Vec::new(),
+            step: 0,
+            history: Vec::new(),
+        })
+    }
+
+    /// Whether every step is done.
+    pub fn finished(&self) -> bool {
+        self.step >= self.recipe.steps
+    }
+
+    /// One step on `shapes` (the shapes named by [`shapes`](Self::shapes),
+    /// in that order). A non-finite loss or gradient is an error and
+    /// leaves the model as it was.
+    pub fn step(&mut self, shapes: &[TrainShape]) -> Result<StepRecord> {
+        if shapes.len() != self.shapes.len() {
+            return Err(Error::Parameter(format!(
+                "{} shapes for a run on {}",
+                shapes.len(),
+                self.shapes.len()
+            )));
+        }
+        let mut rng = self.rng.clone();
+        let (i, j) = if self.pairs.is_empty() {
+            let n = shapes.len() as u64;
+            let i = (rng.next_u64() % n) as usize;
+            (
+                i,
+                (i + 1 + (rng.next_u64() % (n - 1)) as usize) % shapes.len(),
+            )
+        } else {
+            self.pairs[(rng.next_u64() % self.pairs.len() as u64) as usize]
+        };
+        let step = self.step + 1;
+        let (values, mut grad) =
+            pair_loss(&self.model, &self.recipe, &shapes[i], &shapes[j], &mut rng)?;
+        let pair = format!("pair {} -> {}", shapes[i].name, shapes[j].name);
+        if !values.total.is_finite() {
+            return Err(Error::NonFinite {
+                step,
+                what: format!("loss {} on {pair}", values.total),
+            });
+        }
+        let mut groups = grad.groups_mut();
+        let grad_norm = match self.recipe.clip {
+            Some(max) => clip_grad_norm(&mut groups, max),
+            None => clip_grad_norm(&mut groups, f64::INFINITY),
+        };
+        if !grad_norm.is_finite() {
+            return Err(Error::NonFinite {
+                step,
+                what: format!("gradient norm {grad_norm} on {pair}"),
+            });
+        }
+        let lr = self.recipe.lr_at(self.step);
+        self.adam.lr = lr;
+        self.adam.begin_step();
+        for (g, (p, d)) in self
+            .model
+            .net
+            .params_mut()
+            .into_iter()
+            .zip(groups)
+            .enumerate()
+        {
+            self.adam.update(g, p, d);
+        }
+        // The reference keeps the diffusion times at least 1e-8.
+        for b in &mut self.model.net.blocks {
+            b.diffusion.times.apply(|t| *t = t.max(1e-8));
+        }
+        self.rng = rng;
+        self.step = step;
+        let record = StepRecord {
+            step,
+            pair: (i, j),
+            lr,
+            losses: values,
+            grad_norm,
+        };
+        self.history.push(record);
+        Ok(record)
+    }
+
+    /// Writes the checkpoint `path` atomically: the model (a model file
+    /// with the training state added, so a checkpoint loads as a model),
+    /// Adam's moments, the generator, the history.
+    pub fn save(&self, path: impl AsRef<Path>) -> Result<()> {
+        let meta = TrainingMeta {
+            format: CHECKPOINT_FORMAT.into(),
+            version: CHECKPOINT_VERSION,
+            recipe: self.recipe.clone(),
+            shapes: self.shapes.clone(),
+            pairs: self.pairs.clone(),
+            step: self.step,
+            adam_steps: self.adam.steps,
+            rng: self.rng.0,
+            history: self.history.clone(),
+        };
+        let text = serde_json::to_string(&meta)
+            .map_err(|e| Error::Parameter(format!("checkpoint metadata: {e}")))?;
+        let mut buf = Vec::new();
+        npy::write_u8(&mut buf, text.as_bytes()).map_err(|e| Error::Write {
+            path: path.as_ref().to_path_buf(),
+            source: e,
+        })?;
+        let mut extra = vec![("training.npy".to_string(), buf)];
+        let params = self.model.net.params();
+        for (g, p) in params.iter().enumerate() {
+            if let Some((m, v)) = self.adam.moments().get(g)
+                && !m.is_empty()
+            {
+                {
+                    extra.push((format!("adam.m.{}.npy", p.name), tensor_npy(&p.shape, m)?));
+                    extra.push((format!("adam.v.{}.npy", p.name), tensor_npy(&p.shape, v)?));
+                }
+            }
+        }
+        write_entries(path.as_ref(), &self.model.entries(extra)?)
+    }
+
+    /// Reads a checkpoint written by [`save`](Self::save).
+    pub fn load(path: impl AsRef<Path>) -> Result<Trainer> {
+        let path = path.as_ref();
+        let data = fmaps_mesh_io::read_bounded(path, 1 << 31)?;
+        Trainer::parse(&data).map_err(|problem| Error::ModelFile {
+            path: path.to_path_buf(),
+            problem,
+        })
+    }
+
+    fn parse(data: &[u8]) -> std::result::Result<Trainer, String> {
+        let model = Model::parse(data)?;
+        let entries = npz::read_archive(data).map_err(|(at, m)| format!("byte {at}: {m}"))?;
+        let text =
+            npy::parse_u8(entry(&entries, "training").map_err(|_| {
+                "a model file without training state, not a checkpoint".to_string()
+            })?)
+            .map_err(|(_, m)| format!("`training`: {m}"))?;
+        let meta: TrainingMeta = serde_json::from_slice(&text)
+            .map_err(|e| format!("`training` is not a checkpoint's state: {e}"))?;
+        if meta.format != CHECKPOINT_FORMAT || meta.version != CHECKPOINT_VERSION {
+            return Err(format!(
+                "checkpoint format `{}` version {}; this fmaps reads `{CHECKPOINT_FORMAT}` version {CHECKPOINT_VERSION}",
+                meta.format, meta.version
+            ));
+        }
+        let mut moments = Vec::new();
+        if meta.adam_steps > 0 {
+            for p in model.net.params() {
+                let mut pair = (vec![0.0; p.values.len()], vec![0.0; p.values.len()]);
+                for (which, out) in [("m", &mut pair.0), ("v", &mut pair.1)] {
+                    let name = format!("adam.{which}.{}", p.name);
+                    let arr = npy::parse_f64(entry(&entries, &name)?)
+                        .map_err(|(_, m)| format!("`{name}`: {m}"))?;
+                    if arr.shape != p.shape {
+                        return Err(format!(
+                            "`{name}` has shape {:?}, expected {:?}",
+                            arr.shape, p.shape
+                        ));
+                    }
+                    from_row_major(&p.shape, &arr.data, out);
+                }
+                moments.push(pair);
+            }
+        }
+        let mut t = Trainer::new(model, meta.recipe, meta.shapes).map_err(|e| e.to_string())?;
+        if let Some(&(i, j)) = meta
+            .pairs
+            .iter()
+            .find(|&&(i, j)| i.max(j) >= t.shapes.len())
+        {
+            return Err(format!("pair ({i}, {j}) of {} shapes", t.shapes.len()));
+        }
+        t.pairs = meta.pairs;
+        t.adam.steps = meta.adam_steps;
+        t.adam.set_moments(moments);
+        t.rng = SplitMix(meta.rng);
+        t.step = meta.step;
+        t.history = meta.history;
+        Ok(t)
+    }
+
+    /// The provenance entries of a run: recipe, steps, final losses.
+    pub fn provenance(&self) -> BTreeMap<String, String> {
+        let mut p = BTreeMap::new();
+        p.insert(
+            "recipe".into(),
+            serde_json::to_string(&self.recipe).unwrap_or_default(),
+        );
+        p.insert("steps".into(), self.step.to_string());
+        p.insert("shapes".into(), self.shapes.join(" "));
+        if let Some(last) = self.history.last() {
+            p.insert(
+                "final_losses".into(),
+                serde_json::to_string(&last.losses).unwrap_or_default(),
+            );
+        }
+        p
+    }
+}
+
+/// What [`run`] reports as it goes.
+#[derive(Debug, Clone, Copy)]
+pub enum Event<'a> {
+    /// A step is done.
+    Step(&'a StepRecord),
+    /// The checkpoint was written after this step.
+    Saved(u64),
+}
+
+/// Runs `trainer` on `shapes` until its last step (or `stop_after` more
+/// steps), writing the checkpoint `checkpoint` every `save_every` steps and
+/// at the end. On an error (a non-finite loss) the checkpoint keeps the
+/// last good state.
+pub fn run(
+    trainer: &mut Trainer,
+    shapes: &[TrainShape],
+    checkpoint: &Path,
+    save_every: u64,
+    stop_after: Option<u64>,
+    mut on_event: impl FnMut(Event<'_>),
+) -> Result<()> {
+    let last = match stop_after {
+        Some(n) => (trainer.step + n).min(trainer.recipe.steps),
+        None => trainer.recipe.steps,
+    };
+    let mut saved = trainer.step;
+    while trainer.step < last {
+        let record = trainer.step(shapes)?;
+        on_event(Event::Step(&record));
+        if save_every > 0 && trainer.step.is_multiple_of(save_every) {
+            trainer.save(checkpoint)?;
+            saved = trainer.step;
+            on_event(Event::Saved(trainer.step));
+        }
+    }
+    if saved != trainer.step {
+        trainer.save(checkpoint)?;
+        on_event(Event::Saved(trainer.step));
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::model::{Architecture, Preprocessing};
+
+    fn tiny() -> (Model, Recipe) {
+        let arch = Architecture {
+            inputs: 6,
+            width: 6,
+            blocks: 1,
+            outputs: 5,
+        };
+        let pre = Preprocessing {
+            eigenpairs: 8,
+            ..Preprocessing::default()
+        };
+        let recipe = Recipe {
+            steps: 4,
+            fmap_eigenpairs: 6,
+            coupling_samples: Some(30),
+            ..Recipe::default()
+        };
+        (Model::new(arch, pre, 3), recipe)
+    }
+
+    fn shapes(model: &Model, recipe: &Recipe) -> Vec<TrainShape> {
+        let a = fmaps_shapes::icosphere(1.0, 2);
+        let b = a.scaled(2.0).unwrap();
+        let v: Vec<[f64; 3]> = a
+            .vertices()
+            .iter()
+            .map(|p| [p[0] * 1.3, p[1], p[2] * 0.8])
+            .collect();
+        let c = TriMesh::new(v, a.faces().to_vec()).unwrap();
+        [("a", &a), ("b", &b), ("c", &c)]
+            .iter()
+            .map(|(n, m)| TrainShape::new(n, m, model, recipe).unwrap())
+            .collect()
+    }
+
+    /// The pair loss's gradient against a central difference of the
+    /// whole loss (network, layer, every term) along a random direction
+    /// of all parameters, with the same masks and samples.
+    #[test]
+    fn pair_gradient_matches_finite_differences() {
+        let (model, mut recipe) = tiny();
+        recipe.weights.laplacian = 0.01;
+        let s = shapes(&model, &recipe);
+        let mut dir_rng = SplitMix(17);
+        let mut dir = model.clone();
+        for p in dir.net.params_mut() {
+            p.iter_mut().for_each(|v| *v = dir_rng.symmetric());
+        }
+        // Diffusion times at 0 sit on the clamp's kink: move them inside.
+        let mut base = model.clone();
+        for b in &mut base.net.blocks {
+            b.diffusion.times.fill(0.01);
+        }
+        let (_, grad) = pair_loss(&base, &recipe, &s[0], &s[2], &mut SplitMix(9)).unwrap();
+        let mut shifted = |h: f64| {
+            let mut m = base.clone();
+            for (p, d) in m.net.params_mut().into_iter().zip(dir.net.params_mut()) {
+                for (a, b) in p.iter_mut().zip(d.iter()) {
+                    *a += h * b;
+                }
+            }
+            pair_loss(&m, &recipe, &s[0], &s[2], &mut SplitMix(9))
+                .unwrap()
+                .0
+                .total
+        };
+        // ReLU kinks: a step of 1e-6 along a random direction of every
+        // parameter crosses some on this shape (the difference then
+        // errs by 1e-3); 1e-7 stays on one side of them.
+        let h = 1e-7;
+        let numeric = (shifted(h) - shifted(-h)) / (2.0 * h);
+        let mut g = grad.clone();
+        let analytic: f64 = g
+            .groups_mut()
+            .into_iter()
+            .zip(dir.net.params_mut())
+            .map(|(a, b)| a.iter().zip(b.iter()).map(|(x, y)| x * y).sum::<f64>())
+            .sum();
+        assert!(
+            (analytic - numeric).abs() < 1e-6 * analytic.abs().max(1e-3),
+            "analytic {analytic}, finite difference {numeric}"
+        );
+    }
+
+    /// The same seed gives the same run; a run saved after two steps and
+    /// resumed gives the model of a run never stopped, bit for bit.
+    #[test]
+    fn deterministic_and_resumes_exactly() {
+        let (model, recipe) = tiny();
+        let s = shapes(&model, &recipe);
+        let names: Vec<String> = s.iter().map(|x| x.name.clone()).collect();
+        let run = |stop: Option<u64>| {
+            let mut t = Trainer::new(model.clone(), recipe.clone(), names.clone()).unwrap();
+            while !t.finished() {
+                t.step(&s).unwrap();
+                if Some(t.step) == stop {
+                    let dir =
+                        std::env::temp_dir().join(format!("fmaps-ckpt-{}", std::process::id()));
+                    std::fs::create_dir_all(&dir).unwrap();
+                    let path = dir.join("run.npz");
+                    t.save(&path).unwrap();
+                    t = Trainer::load(&path).unwrap();
+                    std::fs::remove_dir_all(&dir).unwrap();
+                }
+            }
+            t
+        };
+        let (a, b, c) = (run(None), run(None), run(Some(2)));
+        assert_eq!(a.model, b.model);
+        assert_eq!(a.model, c.model);
+        assert_eq!(a.history, c.history);
+        assert_ne!(a.model, model, "training changed nothing");
+        // The schedule: lr at the first step, lr_min at the last.
+        assert_eq!(a.history[0].lr, recipe.lr);
+        assert!((a.history[3].lr - recipe.lr_min).abs() < 1e-15);
+    }
+}
