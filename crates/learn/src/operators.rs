@@ -209,10 +209,13 @@ impl ShapeOperators {
 }
 
 /// Unit vertex normals: the normalised sum of the unit normals of the
-/// faces around each vertex (degenerate faces left out).
+/// faces around each vertex (degenerate faces left out). Where those
+/// cancel (a vertex whose faces fold back onto each other, as some
+/// registered scans have), the normalised sum of the neighbours' normals
+/// along the edges, repeated outwards until defined.
 ///
-/// Errors: a vertex in no face or in degenerate faces only, or whose
-/// faces' normals cancel.
+/// Errors: a vertex in no face (or in degenerate faces only) whose
+/// connected part of the mesh has no normal anywhere.
 pub fn vertex_normals(mesh: &TriMesh) -> Result<Vec<[f64; 3]>> {
     let v = mesh.vertices();
     let mut sum = vec![[0.0; 3]; v.len()];
@@ -228,20 +231,40 @@ pub fn vertex_normals(mesh: &TriMesh) -> Result<Vec<[f64; 3]>> {
             }
         }
     }
-    sum.into_iter()
-        .enumerate()
-        .map(|(i, s)| {
-            let len = dot(s, s).sqrt();
-            if len > 1e-12 {
-                Ok(s.map(|c| c / len))
-            } else {
-                Err(Error::Mesh {
-                    vertex: i,
-                    problem: "it has no normal: it is in no face, in degenerate faces only, or its faces' normals cancel".into(),
-                })
-            }
-        })
-        .collect()
+    let unit = |s: [f64; 3]| {
+        let len = dot(s, s).sqrt();
+        (len > 1e-12).then(|| s.map(|c| c / len))
+    };
+    let mut normals: Vec<Option<[f64; 3]>> = sum.into_iter().map(unit).collect();
+    let neighbours = edges(mesh);
+    loop {
+        let missing: Vec<usize> = (0..normals.len()).filter(|&i| normals[i].is_none()).collect();
+        if missing.is_empty() {
+            break;
+        }
+        let filled: Vec<(usize, [f64; 3])> = missing
+            .iter()
+            .filter_map(|&i| {
+                let mut s = [0.0; 3];
+                for &j in &neighbours[i] {
+                    if let Some(n) = normals[j] {
+                        (0..3).for_each(|c| s[c] += n[c]);
+                    }
+                }
+                unit(s).map(|n| (i, n))
+            })
+            .collect();
+        if filled.is_empty() {
+            return Err(Error::Mesh {
+                vertex: missing[0],
+                problem: "it has no normal: it is in no face or in degenerate faces only, and no neighbour has one".into(),
+            });
+        }
+        for (i, n) in filled {
+            normals[i] = Some(n);
+        }
+    }
+    Ok(normals.into_iter().flatten().collect())
 }
 
 /// A frame per unit normal: X is the world axis x projected onto the
