@@ -28,6 +28,7 @@ mod figures;
 mod fit_check;
 mod generated;
 mod geodesic_check;
+mod learn;
 mod pictures;
 mod profile;
 mod publish_check;
@@ -66,6 +67,12 @@ enum Command {
     BenchRefine(bench_refine::Args),
     /// DiffusionNet's forward and backward passes on one benchmark shape.
     BenchLearn(bench_learn::Args),
+    /// `fmaps train` on the FAUST training shapes (tr_reg_000-079); options after `--` go to it.
+    Train(learn::TrainArgs),
+    /// Learned features on a collection's test pairs: nearest features, exact-geodesic error.
+    LearnEval(learn::EvalArgs),
+    /// Arrays for the PyTorch parity check of DiffusionNet and the training losses (crates/learn/peers/parity.py).
+    LearnParity(learn::ParityArgs),
     /// The seed paper's Figure 8 curve and Figure 1 heat maps, into docs/.
     Figures(figures::Args),
     /// Pictures of one test pair per collection (transfer, errors, C, embedding, curves), into docs/pictures/.
@@ -107,5 +114,8 @@ fn main() -> anyhow::Result<()> {
         Command::BenchMatch(a) => bench_match::bench_match(&a),
         Command::BenchRefine(a) => bench_refine::bench_refine(&a),
         Command::BenchLearn(a) => bench_learn::bench_learn(&a),
+        Command::Train(a) => learn::train(&a),
+        Command::LearnEval(a) => learn::learn_eval(&a),
+        Command::LearnParity(a) => learn::learn_parity(&a),
     }
 }

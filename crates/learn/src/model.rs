@@ -14,7 +14,8 @@
 //!   ([`ModelMeta`]): `format` (`"fmaps-model"`), `version` (1), the
 //!   architecture, the input and operator parameters and the training
 //!   provenance (free text, key by key);
-//! - one `float64` array per parameter, named and shaped as the reference
+//! - one `float64` array per parameter (stored in Fortran order, which
+//!   the header says), named and shaped as the reference
 //!   PyTorch implementation's `state_dict` names them
 //!   (`first_lin.weight` is C x C_in, `block_0.diffusion.diffusion_time`
 //!   has C values, ...), so that
@@ -320,7 +321,7 @@ impl Model {
             if let Some(i) = arr.data.iter().position(|v| !v.is_finite()) {
                 return Err(format!("`{name}` value {i} is not finite"));
             }
-            from_row_major(&shape, &arr.data, values);
+            values.copy_from_slice(&arr.data);
         }
         Ok(model)
     }
@@ -375,27 +376,12 @@ pub(crate) fn entry<'a>(
         .ok_or_else(|| format!("no `{name}` entry"))
 }
 
-/// A tensor of `shape` (column-major `values`) as a row-major `.npy`.
+/// A tensor of `shape` (column-major `values`) as an `.npy` (which says
+/// its order: NumPy reads the right array).
 pub(crate) fn tensor_npy(shape: &[usize], values: &[f64]) -> Result<Vec<u8>> {
-    let row_major: Vec<f64> = match shape {
-        [r, c] => (0..r * c).map(|i| values[(i % c) * r + i / c]).collect(),
-        _ => values.to_vec(),
-    };
     let mut buf = Vec::new();
-    npy::write_f64(&mut buf, shape, &row_major).map_err(io)?;
+    npy::write_f64(&mut buf, shape, values).map_err(io)?;
     Ok(buf)
-}
-
-/// Row-major `data` of `shape` into column-major `out`.
-pub(crate) fn from_row_major(shape: &[usize], data: &[f64], out: &mut [f64]) {
-    match shape {
-        [r, c] => {
-            for i in 0..r * c {
-                out[(i % c) * r + i / c] = data[i];
-            }
-        }
-        _ => out.copy_from_slice(data),
-    }
 }
 
 /// Writes an archive of `entries` to `path` by the output policy of
@@ -430,8 +416,8 @@ mod tests {
         Model::new(arch, pre, 7)
     }
 
-    /// A model survives its file exactly; the rows of a weight are the
-    /// reference's (out x in) rows.
+    /// A model survives its file exactly; a weight has the reference's
+    /// shape (out x in).
     #[test]
     fn file_round_trip() {
         let mut m = small();
@@ -451,8 +437,9 @@ mod tests {
         let entries = npz::read_archive(&bytes).unwrap();
         let w = npy::parse_f64(entry(&entries, "first_lin.weight").unwrap()).unwrap();
         assert_eq!(w.shape, vec![5, 6]);
-        assert_eq!(w.data[1], m.net.first.weight[(0, 1)]);
-        assert_eq!(w.data[6], m.net.first.weight[(1, 0)]);
+        // Column-major, as the header says: element (1, 0), then (0, 1).
+        assert_eq!(w.data[1], m.net.first.weight[(1, 0)]);
+        assert_eq!(w.data[5], m.net.first.weight[(0, 1)]);
     }
 
     /// Another version, a missing tensor, a wrong shape, a NaN: refused

@@ -238,7 +238,9 @@ pub fn vertex_normals(mesh: &TriMesh) -> Result<Vec<[f64; 3]>> {
     let mut normals: Vec<Option<[f64; 3]>> = sum.into_iter().map(unit).collect();
     let neighbours = edges(mesh);
     loop {
-        let missing: Vec<usize> = (0..normals.len()).filter(|&i| normals[i].is_none()).collect();
+        let missing: Vec<usize> = (0..normals.len())
+            .filter(|&i| normals[i].is_none())
+            .collect();
         if missing.is_empty() {
             break;
         }

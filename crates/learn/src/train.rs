@@ -31,7 +31,7 @@ use crate::coupling::{CouplingShape, coupling};
 use crate::fmap_layer::FmapLayer;
 use crate::layers::Spectrum;
 use crate::losses;
-use crate::model::{Model, NetBasis, entry, from_row_major, tensor_npy, write_entries};
+use crate::model::{Model, NetBasis, entry, tensor_npy, write_entries};
 use crate::network::{DiffusionNet, DiffusionNetGrad, SplitMix};
 use crate::optim::{Adam, clip_grad_norm};
 use crate::{Error, Result, ShapeOperators};
@@ -214,6 +214,16 @@ impl TrainShape {
         &self.ops
     }
 
+    /// The network's input features.
+    pub fn input(&self) -> &DMatrix<f64> {
+        &self.input
+    }
+
+    /// The functional maps' eigenvalues and eigenvectors.
+    pub fn fmap_basis(&self) -> (&DVector<f64>, &DMatrix<f64>) {
+        (&self.fmap_evals, &self.fmap_evecs)
+    }
+
     fn fmap_spectrum(&self) -> Spectrum<'_> {
         Spectrum {
             eigenvalues: &self.fmap_evals,
@@ -258,31 +268,57 @@ fn side_forward(
     net: &DiffusionNet,
     basis: &NetBasis,
     s: &TrainShape,
-    masks: &[[crate::network::DropoutMask; 2]],
+    masks: Option<&[[crate::network::DropoutMask; 2]]>,
 ) -> (DMatrix<f64>, crate::network::Tape) {
-    net.forward_tape(basis.input(&s.ops), &s.input, Some(masks))
+    net.forward_tape(basis.input(&s.ops), &s.input, masks)
 }
 
 /// The losses of the pair (x, y) and the gradients of the network's
-/// parameters, drawing the dropout masks and the coupling samples from
-/// `rng` (x's then y's).
+/// parameters, drawing the dropout masks (when `dropout`) and the
+/// coupling samples from `rng` (x's then y's).
 pub fn pair_loss(
     model: &Model,
     recipe: &Recipe,
     x: &TrainShape,
     y: &TrainShape,
     rng: &mut SplitMix,
+    dropout: bool,
 ) -> Result<(LossValues, DiffusionNetGrad)> {
+    pair_loss_full(model, recipe, x, y, rng, dropout).map(|p| (p.losses, p.grad))
+}
+
+/// Everything one pair step computes.
+#[derive(Debug, Clone)]
+pub struct PairOutput {
+    /// The losses.
+    pub losses: LossValues,
+    /// The parameters' gradients.
+    pub grad: DiffusionNetGrad,
+    /// The features of x and y.
+    pub features: (DMatrix<f64>, DMatrix<f64>),
+    /// `C_xy` and `C_yx`.
+    pub maps: (DMatrix<f64>, DMatrix<f64>),
+}
+
+/// [`pair_loss`] with the features and maps it computed.
+pub fn pair_loss_full(
+    model: &Model,
+    recipe: &Recipe,
+    x: &TrainShape,
+    y: &TrainShape,
+    rng: &mut SplitMix,
+    dropout: bool,
+) -> Result<PairOutput> {
     let net = &model.net;
     let k_net = model.preprocessing.eigenpairs;
     let (bx, by) = (NetBasis::new(&x.ops, k_net), NetBasis::new(&y.ops, k_net));
-    let masks_x = net.draw_masks(x.input.nrows(), rng);
-    let masks_y = net.draw_masks(y.input.nrows(), rng);
+    let masks_x = dropout.then(|| net.draw_masks(x.input.nrows(), rng));
+    let masks_y = dropout.then(|| net.draw_masks(y.input.nrows(), rng));
     let samples_x = draw_samples(x.input.nrows(), recipe.coupling_samples, rng);
     let samples_y = draw_samples(y.input.nrows(), recipe.coupling_samples, rng);
     let ((fx, tape_x), (fy, tape_y)) = rayon::join(
-        || side_forward(net, &bx, x, &masks_x),
-        || side_forward(net, &by, y, &masks_y),
+        || side_forward(net, &bx, x, masks_x.as_deref()),
+        || side_forward(net, &by, y, masks_y.as_deref()),
     );
     let layer = recipe.layer();
     let (sx, sy) = (x.fmap_spectrum(), y.fmap_spectrum());
@@ -348,7 +384,12 @@ pub fn pair_loss(
         || net.backward_tape(by.input(&y.ops), &y.input, &tape_y, &dfy),
     );
     grad.add(&grad_y);
-    Ok((values, grad))
+    Ok(PairOutput {
+        losses: values,
+        grad,
+        features: (fx, fy),
+        maps: (c_xy, c_yx),
+    })
 }
 
 /// `count` distinct vertices of `n` (all when `None` or at least `n`),
@@ -455,8 +496,14 @@ impl Trainer {
             self.pairs[(rng.next_u64() % self.pairs.len() as u64) as usize]
         };
         let step = self.step + 1;
-        let (values, mut grad) =
-            pair_loss(&self.model, &self.recipe, &shapes[i], &shapes[j], &mut rng)?;
+        let (values, mut grad) = pair_loss(
+            &self.model,
+            &self.recipe,
+            &shapes[i],
+            &shapes[j],
+            &mut rng,
+            true,
+        )?;
         let pair = format!("pair {} -> {}", shapes[i].name, shapes[j].name);
         if !values.total.is_finite() {
             return Err(Error::NonFinite {
@@ -582,7 +629,7 @@ impl Trainer {
                             arr.shape, p.shape
                         ));
                     }
-                    from_row_major(&p.shape, &arr.data, out);
+                    out.copy_from_slice(&arr.data);
                 }
                 moments.push(pair);
             }
@@ -723,7 +770,7 @@ mod tests {
         for b in &mut base.net.blocks {
             b.diffusion.times.fill(0.01);
         }
-        let (_, grad) = pair_loss(&base, &recipe, &s[0], &s[2], &mut SplitMix(9)).unwrap();
+        let (_, grad) = pair_loss(&base, &recipe, &s[0], &s[2], &mut SplitMix(9), true).unwrap();
         let mut shifted = |h: f64| {
             let mut m = base.clone();
             for (p, d) in m.net.params_mut().into_iter().zip(dir.net.params_mut()) {
@@ -731,7 +778,7 @@ mod tests {
                     *a += h * b;
                 }
             }
-            pair_loss(&m, &recipe, &s[0], &s[2], &mut SplitMix(9))
+            pair_loss(&m, &recipe, &s[0], &s[2], &mut SplitMix(9), true)
                 .unwrap()
                 .0
                 .total
