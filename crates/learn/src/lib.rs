@@ -31,6 +31,7 @@
 
 pub mod coupling;
 pub mod fmap_layer;
+mod gemm;
 pub mod layers;
 pub mod losses;
 pub mod model;

@@ -108,7 +108,10 @@ pub struct BlockGrad {
 #[derive(Debug, Clone)]
 struct BlockTape {
     x: DMatrix<f64>,
-    diffused: DMatrix<f64>,
+    /// The input's spectral coefficients.
+    spec: DMatrix<f64>,
+    /// The gradient features' tape.
+    feats: crate::layers::FeaturesTape,
     concat: DMatrix<f64>,
     /// The MLP's hidden pre-activations (after each of the first two
     /// layers) and the inputs of its last two layers (after ReLU and
@@ -144,13 +147,13 @@ impl Block {
         x: &DMatrix<f64>,
         masks: Option<[DropoutMask; 2]>,
     ) -> (DMatrix<f64>, BlockTape) {
-        let diffused = self.diffusion.forward(shape.spectrum, x);
-        let feats = self.features.forward(shape.gradients, &diffused);
+        let (diffused, spec) = self.diffusion.forward_spectral(shape.spectrum, x);
+        let feats = self.features.forward_tape(shape.gradients, &diffused);
         let (n, c) = x.shape();
         let mut concat = DMatrix::zeros(n, 3 * c);
         concat.columns_mut(0, c).copy_from(x);
         concat.columns_mut(c, c).copy_from(&diffused);
-        concat.columns_mut(2 * c, c).copy_from(&feats);
+        concat.columns_mut(2 * c, c).copy_from(&feats.out);
         let h0 = self.mlp[0].forward(&concat);
         let mut in1 = h0.map(|v| v.max(0.0));
         if let Some(m) = &masks {
@@ -164,7 +167,8 @@ impl Block {
         let out = self.mlp[2].forward(&in2) + x;
         let tape = BlockTape {
             x: x.clone(),
-            diffused,
+            spec,
+            feats,
             concat,
             hidden: [h0, h1],
             inputs: [in1, in2],
@@ -201,15 +205,15 @@ impl Block {
         }
         let d_h0 = d_in1.zip_map(&tape.hidden[0], |d, h| if h > 0.0 { d } else { 0.0 });
         let (d_concat, g0) = self.mlp[0].backward(&tape.concat, &d_h0);
-        let (d_feat_in, gf) = self.features.backward(
+        let (d_feat_in, gf) = self.features.backward_tape(
             shape.gradients,
-            &tape.diffused,
+            &tape.feats,
             &d_concat.columns(2 * c, c).into_owned(),
         );
         let d_diffused = d_concat.columns(c, c) + d_feat_in;
-        let (d_x_diff, times) = self
-            .diffusion
-            .backward(shape.spectrum, &tape.x, &d_diffused);
+        let (d_x_diff, times) =
+            self.diffusion
+                .backward_spectral(shape.spectrum, &tape.spec, &d_diffused);
         let dx = dy + d_concat.columns(0, c) + d_x_diff;
         (
             dx,
