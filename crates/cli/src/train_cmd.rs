@@ -55,6 +55,9 @@ pub(crate) struct TrainArgs {
     /// Weight of the Laplacian-commutativity loss.
     #[arg(long, default_value_t = 0.0)]
     w_lap: f64,
+    /// No dropout in the blocks' MLPs (the reference trains with it).
+    #[arg(long)]
+    no_dropout: bool,
     /// Bound on the gradients' global norm.
     #[arg(long)]
     clip: Option<f64>,
@@ -110,6 +113,7 @@ pub(crate) fn train_cmd(args: &TrainArgs) -> Result<(), Failure> {
     recipe.fmap_eigenpairs = args.fmap_k;
     recipe.weights.laplacian = args.w_lap;
     recipe.clip = args.clip;
+    recipe.dropout = !args.no_dropout;
     let arch = Architecture {
         inputs: args.inputs_wks,
         width: args.width,

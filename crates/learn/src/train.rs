@@ -90,6 +90,9 @@ pub struct Recipe {
     pub clip: Option<f64>,
     /// Seed of the initial weights and of every random draw.
     pub seed: u64,
+    /// Dropout in the blocks' MLPs while training (the reference's
+    /// default: on).
+    pub dropout: bool,
 }
 
 /// [`FmapLayer`]'s parameters as a recipe stores them.
@@ -121,6 +124,7 @@ impl Default for Recipe {
             coupling_samples: Some(1000),
             clip: None,
             seed: 1,
+            dropout: true,
         }
     }
 }
@@ -502,7 +506,7 @@ impl Trainer {
             &shapes[i],
             &shapes[j],
             &mut rng,
-            true,
+            self.recipe.dropout,
         )?;
         let pair = format!("pair {} -> {}", shapes[i].name, shapes[j].name);
         if !values.total.is_finite() {
