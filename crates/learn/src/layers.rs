@@ -10,10 +10,14 @@
 //!   reference implementation: with `g = G_X x + i G_Y x` per channel and a
 //!   learned complex-linear map `A = A_re + i A_im` across channels, the
 //!   feature is `tanh(Re(conj(g) ⊙ (A g)))`, i.e. `tanh(g_x b_re + g_y
-//!   b_im)` with `b = A g`. (Some released codes rotate by `A` without the
-//!   imaginary part, `b = A_re g`: the `with_gradient_rotations = false`
-//!   variant; this crate implements the complex one, the reference
-//!   default, which can rotate gradients within the tangent plane.)
+//!   b_im)` with `b = A g`: `b_re = A_re g_x − A_im g_y`, `b_im = A_re g_y
+//!   + A_im g_x`. The released codes write this two ways: the authors'
+//!   DiffusionNet as here, geomfum with `b_im = A_re g_x + A_im g_y`,
+//!   which is not a complex product (it no longer commutes with rotating
+//!   every tangent frame by the same angle, the reason for the complex
+//!   form: the features must not depend on the arbitrary choice of frame
+//!   up to a common rotation). This crate implements the authors' form,
+//!   the reference default `with_gradient_rotations = true`.
 
 use nalgebra::{DMatrix, DVector};
 use sprs::CsMat;
@@ -339,6 +343,59 @@ pub struct FeaturesTape {
 mod tests {
     use super::*;
     use crate::ShapeOperators;
+
+    /// Rotating every vertex's tangent frame by its own angle leaves the
+    /// complex form's features unchanged (the reason for that form); the
+    /// product as geomfum writes it (`b_im = A_re g_x + A_im g_y`)
+    /// changes.
+    #[test]
+    fn gradient_features_ignore_the_frames_rotation() {
+        let mesh = fmaps_shapes::icosphere(1.0, 2);
+        let ops = ShapeOperators::compute(&mesh, 8).unwrap();
+        let n = mesh.n_vertices();
+        let mut rng = fmaps_simd::SplitMix(31);
+        let theta: Vec<f64> = (0..n).map(|_| 3.0 * rng.symmetric()).collect();
+        // Row v of the rotated operators: g'_x = c g_x + s g_y and
+        // g'_y = −s g_x + c g_y (c, s of θ_v).
+        let rotated = |which: usize| {
+            let mut t = sprs::TriMat::new((n, n));
+            for (k, m) in [&ops.grad_x, &ops.grad_y].into_iter().enumerate() {
+                for (v, row) in m.outer_iterator().enumerate() {
+                    let (c, s) = (theta[v].cos(), theta[v].sin());
+                    let coef = [[c, s], [-s, c]][which][k];
+                    for (j, &val) in row.iter() {
+                        t.add_triplet(v, j, coef * val);
+                    }
+                }
+            }
+            t.to_csr::<usize>()
+        };
+        let (gx2, gy2) = (rotated(0), rotated(1));
+        let c = 5;
+        let layer = GradientFeatures {
+            a_re: random(c, c, 32),
+            a_im: random(c, c, 33),
+        };
+        let v = random(n, c, 34);
+        let g1 = Gradients {
+            x: &ops.grad_x,
+            y: &ops.grad_y,
+        };
+        let g2 = Gradients { x: &gx2, y: &gy2 };
+        let (f1, f2) = (layer.forward(g1, &v), layer.forward(g2, &v));
+        assert!(
+            (&f1 - &f2).abs().max() < 1e-12,
+            "{}",
+            (&f1 - &f2).abs().max()
+        );
+        let geomfum = |g: Gradients<'_>| {
+            let (gx, gy) = (sparse_mul(g.x, &v), sparse_mul(g.y, &v));
+            let b_re = &gx * layer.a_re.transpose() - &gy * layer.a_im.transpose();
+            let b_im = &gx * layer.a_re.transpose() + &gy * layer.a_im.transpose();
+            (gx.component_mul(&b_re) + gy.component_mul(&b_im)).map(f64::tanh)
+        };
+        assert!((geomfum(g1) - geomfum(g2)).abs().max() > 1e-2);
+    }
 
     /// The one-`exp` tanh against the C library's, over [−40, 40].
     #[test]

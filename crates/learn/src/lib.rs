@@ -11,8 +11,9 @@
 //! vertex and the sparse gradient operators for the spatial gradient
 //! features; [`layers`] holds its layers with their backward passes,
 //! [`network`] the whole network, [`fmap_layer`] the differentiable
-//! functional-map solve, [`losses`] the unsupervised losses and [`optim`]
-//! Adam and gradient clipping.
+//! functional-map solve, [`losses`] and [`coupling`] the unsupervised
+//! losses, [`optim`] Adam and gradient clipping, [`train`] the training
+//! loop and its checkpoints, [`model`] a trained network and its file.
 //!
 //! ```
 //! use fmaps_learn::ShapeOperators;
@@ -107,3 +108,8 @@ pub enum Error {
 
 /// Result alias of this crate.
 pub type Result<T, E = Error> = std::result::Result<T, E>;
+
+/// The README's example, compiled and run as a doctest.
+#[cfg(doctest)]
+#[doc = include_str!("../README.md")]
+struct ReadmeDoctests;

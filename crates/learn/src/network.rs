@@ -356,6 +356,84 @@ pub struct Tape {
     last: DMatrix<f64>,
 }
 
+/// A per-vertex feature network as training drives it: the losses and
+/// the optimiser talk to this trait, so another network or another
+/// backend (a framework, an f32 path) can take DiffusionNet's place.
+pub trait FeatureNet: Sync {
+    /// The random choices of one training pass (dropout masks).
+    type Noise: Send + Sync;
+    /// What a training forward pass keeps for its backward pass.
+    type Tape: Send + Sync;
+    /// The parameters' gradients.
+    type Grad: Send;
+
+    /// Draws the random choices of a training pass on `n` vertices.
+    fn draw(&self, n: usize, rng: &mut SplitMix) -> Self::Noise;
+    /// The features (n x outputs) of input `x`, with `noise` while
+    /// training (`None` to evaluate), and the tape.
+    fn forward_train(
+        &self,
+        shape: ShapeInput<'_>,
+        x: &DMatrix<f64>,
+        noise: Option<&Self::Noise>,
+    ) -> (DMatrix<f64>, Self::Tape);
+    /// The parameters' gradients for `dy` = d loss / d features.
+    fn backward_train(
+        &self,
+        shape: ShapeInput<'_>,
+        x: &DMatrix<f64>,
+        tape: &Self::Tape,
+        dy: &DMatrix<f64>,
+    ) -> Self::Grad;
+    /// `a += b`.
+    fn add_grad(a: &mut Self::Grad, b: &Self::Grad);
+    /// The parameters' values, in a fixed order.
+    fn params_mut(&mut self) -> Vec<&mut [f64]>;
+    /// The gradients, in the order of [`params_mut`](Self::params_mut).
+    fn grad_groups_mut(g: &mut Self::Grad) -> Vec<&mut [f64]>;
+}
+
+impl FeatureNet for DiffusionNet {
+    type Noise = Vec<[DropoutMask; 2]>;
+    type Tape = Tape;
+    type Grad = DiffusionNetGrad;
+
+    fn draw(&self, n: usize, rng: &mut SplitMix) -> Self::Noise {
+        self.draw_masks(n, rng)
+    }
+
+    fn forward_train(
+        &self,
+        shape: ShapeInput<'_>,
+        x: &DMatrix<f64>,
+        noise: Option<&Self::Noise>,
+    ) -> (DMatrix<f64>, Tape) {
+        self.forward_tape(shape, x, noise.map(Vec::as_slice))
+    }
+
+    fn backward_train(
+        &self,
+        shape: ShapeInput<'_>,
+        x: &DMatrix<f64>,
+        tape: &Tape,
+        dy: &DMatrix<f64>,
+    ) -> DiffusionNetGrad {
+        self.backward_tape(shape, x, tape, dy).1
+    }
+
+    fn add_grad(a: &mut DiffusionNetGrad, b: &DiffusionNetGrad) {
+        a.add(b);
+    }
+
+    fn params_mut(&mut self) -> Vec<&mut [f64]> {
+        DiffusionNet::params_mut(self)
+    }
+
+    fn grad_groups_mut(g: &mut DiffusionNetGrad) -> Vec<&mut [f64]> {
+        g.groups_mut()
+    }
+}
+
 /// One parameter tensor of a network, by the name the reference
 /// implementation's PyTorch `state_dict` gives it (`first_lin.weight`,
 /// `block_0.diffusion.diffusion_time`, ...), with its shape.

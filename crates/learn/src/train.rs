@@ -32,7 +32,7 @@ use crate::fmap_layer::FmapLayer;
 use crate::layers::Spectrum;
 use crate::losses;
 use crate::model::{Model, NetBasis, entry, tensor_npy, write_entries};
-use crate::network::{DiffusionNet, DiffusionNetGrad, SplitMix};
+use crate::network::{DiffusionNetGrad, FeatureNet, SplitMix};
 use crate::optim::{Adam, clip_grad_norm};
 use crate::{Error, Result, ShapeOperators};
 
@@ -267,16 +267,6 @@ pub struct StepRecord {
     pub grad_norm: f64,
 }
 
-/// The forward and backward pass of one side.
-fn side_forward(
-    net: &DiffusionNet,
-    basis: &NetBasis,
-    s: &TrainShape,
-    masks: Option<&[[crate::network::DropoutMask; 2]]>,
-) -> (DMatrix<f64>, crate::network::Tape) {
-    net.forward_tape(basis.input(&s.ops), &s.input, masks)
-}
-
 /// The losses of the pair (x, y) and the gradients of the network's
 /// parameters, drawing the dropout masks (when `dropout`) and the
 /// coupling samples from `rng` (x's then y's).
@@ -293,11 +283,11 @@ pub fn pair_loss(
 
 /// Everything one pair step computes.
 #[derive(Debug, Clone)]
-pub struct PairOutput {
+pub struct PairOutput<G = DiffusionNetGrad> {
     /// The losses.
     pub losses: LossValues,
     /// The parameters' gradients.
-    pub grad: DiffusionNetGrad,
+    pub grad: G,
     /// The features of x and y.
     pub features: (DMatrix<f64>, DMatrix<f64>),
     /// `C_xy` and `C_yx`.
@@ -313,16 +303,29 @@ pub fn pair_loss_full(
     rng: &mut SplitMix,
     dropout: bool,
 ) -> Result<PairOutput> {
-    let net = &model.net;
     let k_net = model.preprocessing.eigenpairs;
+    pair_loss_of(&model.net, k_net, recipe, x, y, rng, dropout)
+}
+
+/// [`pair_loss_full`] for any [`FeatureNet`] whose diffusion uses the
+/// first `k_net` eigenpairs.
+pub fn pair_loss_of<N: FeatureNet>(
+    net: &N,
+    k_net: usize,
+    recipe: &Recipe,
+    x: &TrainShape,
+    y: &TrainShape,
+    rng: &mut SplitMix,
+    dropout: bool,
+) -> Result<PairOutput<N::Grad>> {
     let (bx, by) = (NetBasis::new(&x.ops, k_net), NetBasis::new(&y.ops, k_net));
-    let masks_x = dropout.then(|| net.draw_masks(x.input.nrows(), rng));
-    let masks_y = dropout.then(|| net.draw_masks(y.input.nrows(), rng));
+    let noise_x = dropout.then(|| net.draw(x.input.nrows(), rng));
+    let noise_y = dropout.then(|| net.draw(y.input.nrows(), rng));
     let samples_x = draw_samples(x.input.nrows(), recipe.coupling_samples, rng);
     let samples_y = draw_samples(y.input.nrows(), recipe.coupling_samples, rng);
     let ((fx, tape_x), (fy, tape_y)) = rayon::join(
-        || side_forward(net, &bx, x, masks_x.as_deref()),
-        || side_forward(net, &by, y, masks_y.as_deref()),
+        || net.forward_train(bx.input(&x.ops), &x.input, noise_x.as_ref()),
+        || net.forward_train(by.input(&y.ops), &y.input, noise_y.as_ref()),
     );
     let layer = recipe.layer();
     let (sx, sy) = (x.fmap_spectrum(), y.fmap_spectrum());
@@ -383,11 +386,11 @@ pub fn pair_loss_full(
     let (db2, da2) = layer.backward(&b, &a, &y.fmap_evals, &x.fmap_evals, &d_yx)?;
     dfx += sx.project_backward(&(da1 + da2));
     dfy += sy.project_backward(&(db1 + db2));
-    let ((_, mut grad), (_, grad_y)) = rayon::join(
-        || net.backward_tape(bx.input(&x.ops), &x.input, &tape_x, &dfx),
-        || net.backward_tape(by.input(&y.ops), &y.input, &tape_y, &dfy),
+    let (mut grad, grad_y) = rayon::join(
+        || net.backward_train(bx.input(&x.ops), &x.input, &tape_x, &dfx),
+        || net.backward_train(by.input(&y.ops), &y.input, &tape_y, &dfy),
     );
-    grad.add(&grad_y);
+    N::add_grad(&mut grad, &grad_y);
     Ok(PairOutput {
         losses: values,
         grad,
