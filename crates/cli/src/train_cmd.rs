@@ -7,8 +7,8 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::anyhow;
-use fmaps::learn::model::{Architecture, Model, Preprocessing};
-use fmaps::learn::train::{self, Event, Recipe, StepRecord, TrainShape, Trainer};
+use fmaps::learn::model::{Architecture, Input, Model, Preprocessing};
+use fmaps::learn::train::{self, Event, Recipe, Rotation, StepRecord, TrainShape, Trainer};
 use fmaps::mesh_io::TriMesh;
 use fmaps::viz::plot::{Plot, Series, line_plot};
 use rayon::prelude::*;
@@ -70,9 +70,16 @@ pub(crate) struct TrainArgs {
     /// Output features.
     #[arg(long, default_value_t = 256)]
     outputs: usize,
-    /// Input features (WKS energies).
+    /// The network's input: the WKS (intrinsic) or the vertex
+    /// coordinates (augmented by --rotation and random scales 0.9-1.1).
+    #[arg(long, value_enum, default_value_t = InputArg::Wks)]
+    input: InputArg,
+    /// Input features when --input wks (WKS energies).
     #[arg(long, default_value_t = 128)]
     inputs_wks: usize,
+    /// Random rotations of coordinate inputs while training.
+    #[arg(long, value_enum, default_value_t = RotationArg::Any)]
+    rotation: RotationArg,
     /// Eigenpairs of the network's diffusion and of the WKS.
     #[arg(long, default_value_t = 128)]
     eigenpairs: usize,
@@ -92,6 +99,19 @@ pub(crate) struct TrainArgs {
     /// Extra provenance of the model file, KEY=VALUE (repeatable).
     #[arg(long, value_name = "KEY=VALUE")]
     provenance: Vec<String>,
+}
+
+#[derive(Clone, Copy, clap::ValueEnum)]
+enum InputArg {
+    Wks,
+    Xyz,
+}
+
+#[derive(Clone, Copy, clap::ValueEnum)]
+enum RotationArg {
+    Any,
+    Y,
+    None,
 }
 
 pub(crate) fn train_cmd(args: &TrainArgs) -> Result<(), Failure> {
@@ -114,13 +134,23 @@ pub(crate) fn train_cmd(args: &TrainArgs) -> Result<(), Failure> {
     recipe.weights.laplacian = args.w_lap;
     recipe.clip = args.clip;
     recipe.dropout = !args.no_dropout;
+    recipe.augment.rotation = match args.rotation {
+        RotationArg::Any => Rotation::Any,
+        RotationArg::Y => Rotation::Y,
+        RotationArg::None => Rotation::None,
+    };
+    let (input_kind, inputs) = match args.input {
+        InputArg::Wks => (Input::Wks, args.inputs_wks),
+        InputArg::Xyz => (Input::Xyz, 3),
+    };
     let arch = Architecture {
-        inputs: args.inputs_wks,
+        inputs,
         width: args.width,
         blocks: args.blocks,
         outputs: args.outputs,
     };
     let pre = Preprocessing {
+        input: input_kind,
         eigenpairs: args.eigenpairs,
         ..Preprocessing::default()
     };

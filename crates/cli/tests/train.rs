@@ -179,3 +179,15 @@ fn bad_input_is_refused() {
     }
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+#[test]
+fn coordinate_inputs() {
+    let dir = tmpdir("train-xyz");
+    shapes(&dir);
+    let o = train(&dir, "xyz.npz", &["--input", "xyz", "--rotation", "y"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let m = fmaps::learn::model::Model::load(dir.join("xyz.npz")).unwrap();
+    assert_eq!(m.preprocessing.input, fmaps::learn::model::Input::Xyz);
+    assert_eq!(m.architecture().inputs, 3);
+    std::fs::remove_dir_all(&dir).unwrap();
+}

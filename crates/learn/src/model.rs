@@ -71,9 +71,26 @@ impl Default for Architecture {
     }
 }
 
+/// The network's input features.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Input {
+    /// The WKS of the first eigenpairs with the automatic energies (as
+    /// many as the network's inputs), each column M-normalised: intrinsic,
+    /// the same in any pose, orientation and scale.
+    #[default]
+    Wks,
+    /// The vertex coordinates of the mesh scaled to unit area, its
+    /// area-weighted centroid at the origin (3 inputs); training augments
+    /// them by random rotations and scales ([`crate::train::Augment`]).
+    Xyz,
+}
+
 /// How a mesh becomes the network's input and operators.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct Preprocessing {
+    /// The input features.
+    pub input: Input,
     /// Eigenpairs of the spectral diffusion (and of the WKS input).
     pub eigenpairs: usize,
     /// The gradient operators' ridge regularisation.
@@ -84,6 +101,7 @@ impl Default for Preprocessing {
     /// DiffusionNet's: 128 eigenpairs, regularisation 1e-5.
     fn default() -> Self {
         Preprocessing {
+            input: Input::Wks,
             eigenpairs: 128,
             gradient_regularization: GRAD_REGULARIZATION,
         }
@@ -99,10 +117,7 @@ pub struct ModelMeta {
     pub version: u32,
     /// The network's shape.
     pub architecture: Architecture,
-    /// The input: `"wks"` (the WKS of the first eigenpairs with the
-    /// automatic energies, each column M-normalised).
-    pub input: String,
-    /// Operators and input parameters.
+    /// Input and operators' parameters.
     pub preprocessing: Preprocessing,
     /// How the model was made (command, recipe, data, commit, steps, wall
     /// time, CPU, final losses): free text by key.
@@ -156,7 +171,7 @@ impl Model {
         let (unit, _) = mesh.to_unit_area()?;
         let k = eigenpairs.max(self.preprocessing.eigenpairs);
         let operators = ShapeOperators::compute(&unit, k)?;
-        let input = self.input(&operators)?;
+        let input = self.input(&unit, &operators)?;
         Ok(Prepared { operators, input })
     }
 
@@ -179,14 +194,31 @@ impl Model {
         })?;
         let file = cache.join(format!("operators-{}-k{k}-{hash}.npz", unit.n_vertices()));
         let (operators, _) = ShapeOperators::cached(&unit, k, &file)?;
-        let input = self.input(&operators)?;
+        let input = self.input(&unit, &operators)?;
         Ok(Prepared { operators, input })
     }
 
-    /// The input features from a shape's operators: the WKS of the first
-    /// [`Preprocessing::eigenpairs`] eigenpairs, `inputs` energies, each
-    /// column M-normalised.
-    pub fn input(&self, ops: &ShapeOperators) -> Result<DMatrix<f64>> {
+    /// The input features ([`Input`]) of a mesh scaled to unit area,
+    /// from its operators.
+    pub fn input(&self, unit: &TriMesh, ops: &ShapeOperators) -> Result<DMatrix<f64>> {
+        if self.preprocessing.input == Input::Xyz {
+            if self.net.inputs() != 3 {
+                return Err(Error::Parameter(format!(
+                    "{} inputs for vertex coordinates",
+                    self.net.inputs()
+                )));
+            }
+            let v = unit.vertices();
+            let total = ops.mass.sum();
+            let centre: [f64; 3] = std::array::from_fn(|c| {
+                v.iter()
+                    .zip(ops.mass.iter())
+                    .map(|(p, m)| p[c] * m)
+                    .sum::<f64>()
+                    / total
+            });
+            return Ok(DMatrix::from_fn(v.len(), 3, |i, c| v[i][c] - centre[c]));
+        }
         let k = self.preprocessing.eigenpairs;
         if ops.eigenvalues.len() < k {
             return Err(Error::Parameter(format!(
@@ -233,7 +265,6 @@ impl Model {
             format: FORMAT.into(),
             version: VERSION,
             architecture: self.architecture(),
-            input: "wks".into(),
             preprocessing: self.preprocessing,
             provenance: self.provenance.clone(),
         }
@@ -290,9 +321,6 @@ impl Model {
                 meta.version
             ));
         }
-        if meta.input != "wks" {
-            return Err(format!("input `{}`, expected `wks`", meta.input));
-        }
         let a = meta.architecture;
         let p = meta.preprocessing;
         if a.inputs == 0 || a.width == 0 || a.outputs == 0 || a.inputs > 4096 || a.width > 4096 {
@@ -300,6 +328,9 @@ impl Model {
         }
         if a.blocks > 64 || a.outputs > 4096 || p.eigenpairs == 0 || p.eigenpairs > 4096 {
             return Err(format!("architecture {a:?} / {p:?} out of range"));
+        }
+        if p.input == Input::Xyz && a.inputs != 3 {
+            return Err(format!("{} inputs for vertex coordinates", a.inputs));
         }
         let mut model = Model::new(a, p, 0);
         model.provenance = meta.provenance;

@@ -31,7 +31,7 @@ use crate::coupling::{CouplingShape, coupling};
 use crate::fmap_layer::FmapLayer;
 use crate::layers::Spectrum;
 use crate::losses;
-use crate::model::{Model, NetBasis, entry, tensor_npy, write_entries};
+use crate::model::{Input, Model, NetBasis, entry, tensor_npy, write_entries};
 use crate::network::{DiffusionNetGrad, FeatureNet, SplitMix};
 use crate::optim::{Adam, clip_grad_norm};
 use crate::{Error, Result, ShapeOperators};
@@ -93,6 +93,69 @@ pub struct Recipe {
     /// Dropout in the blocks' MLPs while training (the reference's
     /// default: on).
     pub dropout: bool,
+    /// Augmentation of coordinate inputs ([`Input::Xyz`]; WKS inputs are
+    /// intrinsic and taken as they are).
+    pub augment: Augment,
+}
+
+/// Random rotations and scales of coordinate inputs, one per shape and
+/// step.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Augment {
+    /// Which rotations.
+    pub rotation: Rotation,
+    /// The scale is uniform in `[scale[0], scale[1]]`.
+    pub scale: [f64; 2],
+}
+
+/// Rotations of [`Augment`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Rotation {
+    /// None.
+    None,
+    /// About the y axis (the up axis of FAUST, SCAPE and most scans).
+    Y,
+    /// Uniform over all rotations (a random unit quaternion).
+    Any,
+}
+
+impl Default for Augment {
+    /// Any rotation, scales in [0.9, 1.1].
+    fn default() -> Self {
+        Augment {
+            rotation: Rotation::Any,
+            scale: [0.9, 1.1],
+        }
+    }
+}
+
+impl Augment {
+    /// `x` (n x 3) rotated and scaled by a draw from `rng`.
+    pub fn apply(&self, x: &DMatrix<f64>, rng: &mut SplitMix) -> DMatrix<f64> {
+        let r = match self.rotation {
+            Rotation::None => nalgebra::Matrix3::identity(),
+            Rotation::Y => {
+                let a = std::f64::consts::PI * rng.symmetric();
+                let (s, c) = a.sin_cos();
+                nalgebra::Matrix3::new(c, 0.0, s, 0.0, 1.0, 0.0, -s, 0.0, c)
+            }
+            Rotation::Any => {
+                // A normalised 4D Gaussian is a uniform unit quaternion.
+                let mut g = || {
+                    let (u, v) = (rng.unit_open(), rng.unit());
+                    (-2.0 * u.ln()).sqrt() * (std::f64::consts::TAU * v).cos()
+                };
+                let q = nalgebra::Quaternion::new(g(), g(), g(), g());
+                *nalgebra::UnitQuaternion::from_quaternion(q)
+                    .to_rotation_matrix()
+                    .matrix()
+            }
+        };
+        let s = self.scale[0] + (self.scale[1] - self.scale[0]) * rng.unit();
+        let rt = DMatrix::from_fn(3, 3, |i, j| s * r[(j, i)]);
+        x * rt
+    }
 }
 
 /// [`FmapLayer`]'s parameters as a recipe stores them.
@@ -125,6 +188,7 @@ impl Default for Recipe {
             clip: None,
             seed: 1,
             dropout: true,
+            augment: Augment::default(),
         }
     }
 }
@@ -304,11 +368,13 @@ pub fn pair_loss_full(
     dropout: bool,
 ) -> Result<PairOutput> {
     let k_net = model.preprocessing.eigenpairs;
-    pair_loss_of(&model.net, k_net, recipe, x, y, rng, dropout)
+    let augment = (dropout && model.preprocessing.input == Input::Xyz).then_some(&recipe.augment);
+    pair_loss_of(&model.net, k_net, recipe, x, y, rng, dropout, augment)
 }
 
 /// [`pair_loss_full`] for any [`FeatureNet`] whose diffusion uses the
-/// first `k_net` eigenpairs.
+/// first `k_net` eigenpairs, the inputs augmented by `augment` when given.
+#[allow(clippy::too_many_arguments)]
 pub fn pair_loss_of<N: FeatureNet>(
     net: &N,
     k_net: usize,
@@ -317,16 +383,40 @@ pub fn pair_loss_of<N: FeatureNet>(
     y: &TrainShape,
     rng: &mut SplitMix,
     dropout: bool,
+    augment: Option<&Augment>,
 ) -> Result<PairOutput<N::Grad>> {
     let (bx, by) = (NetBasis::new(&x.ops, k_net), NetBasis::new(&y.ops, k_net));
+    let (input_x, input_y) = match augment {
+        Some(a) => (
+            std::borrow::Cow::Owned(a.apply(&x.input, rng)),
+            std::borrow::Cow::Owned(a.apply(&y.input, rng)),
+        ),
+        None => (
+            std::borrow::Cow::Borrowed(&x.input),
+            std::borrow::Cow::Borrowed(&y.input),
+        ),
+    };
     let noise_x = dropout.then(|| net.draw(x.input.nrows(), rng));
     let noise_y = dropout.then(|| net.draw(y.input.nrows(), rng));
     let samples_x = draw_samples(x.input.nrows(), recipe.coupling_samples, rng);
     let samples_y = draw_samples(y.input.nrows(), recipe.coupling_samples, rng);
     let ((fx, tape_x), (fy, tape_y)) = rayon::join(
-        || net.forward_train(bx.input(&x.ops), &x.input, noise_x.as_ref()),
-        || net.forward_train(by.input(&y.ops), &y.input, noise_y.as_ref()),
+        || net.forward_train(bx.input(&x.ops), &input_x, noise_x.as_ref()),
+        || net.forward_train(by.input(&y.ops), &input_y, noise_y.as_ref()),
     );
+    for (f, s) in [(&fx, x), (&fy, y)] {
+        if let Some(i) = f.iter().position(|v| !v.is_finite()) {
+            return Err(Error::NonFinite {
+                step: 0,
+                what: format!(
+                    "feature {} of vertex {} of {}",
+                    i / f.nrows(),
+                    i % f.nrows(),
+                    s.name
+                ),
+            });
+        }
+    }
     let layer = recipe.layer();
     let (sx, sy) = (x.fmap_spectrum(), y.fmap_spectrum());
     let (a, b) = (sx.project(&fx), sy.project(&fy));
@@ -387,8 +477,8 @@ pub fn pair_loss_of<N: FeatureNet>(
     dfx += sx.project_backward(&(da1 + da2));
     dfy += sy.project_backward(&(db1 + db2));
     let (mut grad, grad_y) = rayon::join(
-        || net.backward_train(bx.input(&x.ops), &x.input, &tape_x, &dfx),
-        || net.backward_train(by.input(&y.ops), &y.input, &tape_y, &dfy),
+        || net.backward_train(bx.input(&x.ops), &input_x, &tape_x, &dfx),
+        || net.backward_train(by.input(&y.ops), &input_y, &tape_y, &dfy),
     );
     N::add_grad(&mut grad, &grad_y);
     Ok(PairOutput {
@@ -503,6 +593,7 @@ impl Trainer {
             self.pairs[(rng.next_u64() % self.pairs.len() as u64) as usize]
         };
         let step = self.step + 1;
+        let pair = format!("pair {} -> {}", shapes[i].name, shapes[j].name);
         let (values, mut grad) = pair_loss(
             &self.model,
             &self.recipe,
@@ -510,8 +601,14 @@ impl Trainer {
             &shapes[j],
             &mut rng,
             self.recipe.dropout,
-        )?;
-        let pair = format!("pair {} -> {}", shapes[i].name, shapes[j].name);
+        )
+        .map_err(|e| match e {
+            Error::NonFinite { what, .. } => Error::NonFinite {
+                step,
+                what: format!("{what}, {pair}"),
+            },
+            other => other,
+        })?;
         if !values.total.is_finite() {
             return Err(Error::NonFinite {
                 step,
@@ -806,6 +903,79 @@ mod tests {
             (analytic - numeric).abs() < 1e-6 * analytic.abs().max(1e-3),
             "analytic {analytic}, finite difference {numeric}"
         );
+    }
+
+    /// Augmentation rotates and scales: the Gram matrix of the points is
+    /// the original's times s², with s in the range; `Y` keeps the y
+    /// coordinates up to the scale.
+    #[test]
+    fn augmentation_is_a_similarity() {
+        let x = crate::testing::random(9, 3, 41);
+        let mut rng = SplitMix(5);
+        for rotation in [Rotation::Any, Rotation::Y, Rotation::None] {
+            let a = Augment {
+                rotation,
+                scale: [0.9, 1.1],
+            };
+            for _ in 0..20 {
+                let y = a.apply(&x, &mut rng);
+                let (gx, gy) = (&x * x.transpose(), &y * y.transpose());
+                let s2 = gy[(0, 0)] / gx[(0, 0)];
+                assert!((0.81..=1.21).contains(&s2), "{s2}");
+                assert!((gy - gx * s2).abs().max() < 1e-12);
+                if rotation == Rotation::Y {
+                    let s = s2.sqrt();
+                    assert!((y.column(1) - x.column(1) * s).abs().max() < 1e-12);
+                }
+            }
+        }
+    }
+
+    /// A coordinate-input network trains (finite losses, a different
+    /// model) and its file says so.
+    #[test]
+    fn coordinate_inputs_train() {
+        let arch = Architecture {
+            inputs: 3,
+            width: 6,
+            blocks: 1,
+            outputs: 8,
+        };
+        let pre = Preprocessing {
+            input: Input::Xyz,
+            eigenpairs: 8,
+            ..Preprocessing::default()
+        };
+        let mut recipe = tiny().1;
+        recipe.steps = 2;
+        let model = Model::new(arch, pre, 3);
+        let s = shapes(&model, &recipe);
+        let names: Vec<String> = s.iter().map(|x| x.name.clone()).collect();
+        let mut t = Trainer::new(model.clone(), recipe, names).unwrap();
+        while !t.finished() {
+            assert!(t.step(&s).unwrap().losses.total.is_finite());
+        }
+        assert_ne!(t.model, model);
+        let meta = serde_json::to_string(&t.model.meta()).unwrap();
+        assert!(meta.contains("\"input\":\"xyz\""), "{meta}");
+    }
+
+    /// A step whose loss is not finite is an error naming the step and
+    /// the pair, and leaves the model and the step count as they were.
+    #[test]
+    fn non_finite_losses_change_nothing() {
+        let (model, recipe) = tiny();
+        let mut s = shapes(&model, &recipe);
+        let names: Vec<String> = s.iter().map(|x| x.name.clone()).collect();
+        for sh in &mut s {
+            sh.input[(3, 2)] = f64::NAN;
+        }
+        let mut t = Trainer::new(model.clone(), recipe, names).unwrap();
+        let e = t.step(&s).unwrap_err();
+        assert!(matches!(e, Error::NonFinite { step: 1, .. }), "{e}");
+        assert!(e.to_string().contains("pair"), "{e}");
+        assert_eq!(t.model, model);
+        assert_eq!(t.step, 0);
     }
 
     /// The same seed gives the same run; a run saved after two steps and
