@@ -91,10 +91,12 @@ pub struct EvalArgs {
     /// architecture, seed 1).
     #[arg(long, required = true)]
     model: Vec<String>,
-    /// Collection.
-    #[arg(long, default_value = "FAUST")]
+    /// Collection (`FAUST_r`: the test shapes tr_reg_080-099, all 190
+    /// pairs; or any collection of `cargo xtask eval`). Pairs with a FAUST
+    /// training shape are refused.
+    #[arg(long, default_value = "FAUST_r")]
     collection: String,
-    /// Evaluate only the first N test pairs.
+    /// Evaluate N pairs spread evenly over the list.
     #[arg(long)]
     pairs: Option<usize>,
     /// Datasets folder (default: FMAPS_DATA or ../shared/datasets).
@@ -122,10 +124,21 @@ fn nearest_by_cosine(a: &DMatrix<f64>, b: &DMatrix<f64>) -> Vec<usize> {
 
 pub fn learn_eval(args: &EvalArgs) -> anyhow::Result<()> {
     let root = data_dir(args.data.as_deref()).join("bcicp");
-    let c = Collection::open(&root, &args.collection)?;
-    let mut pairs = c.test_pairs()?;
-    if let Some(n) = args.pairs {
-        pairs.truncate(n);
+    let (c, mut pairs) = crate::eval::collection_pairs(&root, &args.collection)?;
+    let training = faust_training_shapes();
+    if c.name() == "FAUST"
+        && let Some((a, b)) = pairs
+            .iter()
+            .find(|(a, b)| training.contains(a) || training.contains(b))
+    {
+        anyhow::bail!(
+            "{}: the pair {a} {b} has a FAUST training shape; evaluate on FAUST_r",
+            args.collection
+        );
+    }
+    if let Some(n) = args.pairs.filter(|&n| n < pairs.len()) {
+        let len = pairs.len();
+        pairs = (0..n).map(|i| pairs[i * len / n].clone()).collect();
     }
     let mut shapes: Vec<String> = pairs
         .iter()

@@ -89,7 +89,8 @@ pub enum Input {
 /// How a mesh becomes the network's input and operators.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct Preprocessing {
-    /// The input features.
+    /// The input features (WKS when the file does not say).
+    #[serde(default)]
     pub input: Input,
     /// Eigenpairs of the spectral diffusion (and of the WKS input).
     pub eigenpairs: usize,

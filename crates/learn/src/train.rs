@@ -92,10 +92,16 @@ pub struct Recipe {
     pub seed: u64,
     /// Dropout in the blocks' MLPs while training (the reference's
     /// default: on).
+    #[serde(default = "on")]
     pub dropout: bool,
     /// Augmentation of coordinate inputs ([`Input::Xyz`]; WKS inputs are
     /// intrinsic and taken as they are).
+    #[serde(default)]
     pub augment: Augment,
+}
+
+fn on() -> bool {
+    true
 }
 
 /// Random rotations and scales of coordinate inputs, one per shape and
