@@ -14,8 +14,8 @@ Run in a benchmark venv with torch and geomfum (both from PyPI), after
    complex-linear map as A_re(g_x) + A_im(g_y); the authors' DiffusionNet
    (and fmaps) use A_re(g_y) + A_im(g_x), the product of the complex
    number A = A_re + i A_im with g = g_x + i g_y.  The script runs the
-   network with the authors' product (and reports geomfum's as written,
-   for the record of the difference).
+   network with the authors' product (and reports the difference geomfum's
+   product as written makes).
 2. One training step: the regularised functional-map layer (resolvent mask,
    Ren et al. 2019; row by row as ULRSSM solves it), the bijectivity,
    orthogonality, Laplacian-commutativity and coupling losses written here
