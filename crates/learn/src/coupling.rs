@@ -19,6 +19,9 @@
 
 use nalgebra::{DMatrix, DVector};
 
+use crate::gemm::Op::{N, T};
+use crate::gemm::{mul, mul_add};
+
 /// One shape's side of the coupling loss.
 #[derive(Debug, Clone, Copy)]
 pub struct CouplingShape<'a> {
@@ -89,28 +92,38 @@ fn sample(s: &CouplingShape<'_>) -> Sampled {
     }
 }
 
-/// Row softmax of `z / tau`.
-fn softmax_rows(z: &DMatrix<f64>, tau: f64) -> DMatrix<f64> {
-    let mut p = z / tau;
-    for mut row in p.row_iter_mut() {
-        let max = row.max();
-        row.apply(|v| *v = (*v - max).exp());
-        let sum = row.sum();
-        row /= sum;
+/// Column softmax of `z / tau` (each column a distribution; columns are
+/// contiguous in nalgebra's storage).
+fn softmax_columns(z: &DMatrix<f64>, tau: f64) -> DMatrix<f64> {
+    let mut p = z.clone();
+    let rows = p.nrows();
+    for col in p.as_mut_slice().chunks_exact_mut(rows) {
+        let max = col.iter().fold(f64::NEG_INFINITY, |m, &v| m.max(v));
+        let mut sum = 0.0;
+        for v in col.iter_mut() {
+            *v = ((*v - max) / tau).exp();
+            sum += *v;
+        }
+        col.iter_mut().for_each(|v| *v /= sum);
     }
     p
 }
 
-/// `d z` of `p = softmax_rows(z / tau)` given `dp`.
-fn softmax_rows_backward(p: &DMatrix<f64>, dp: &DMatrix<f64>, tau: f64) -> DMatrix<f64> {
+/// `d z` of `p = softmax_columns(z / tau)` given `dp`.
+fn softmax_columns_backward(p: &DMatrix<f64>, dp: &DMatrix<f64>, tau: f64) -> DMatrix<f64> {
     let mut dz = p.component_mul(dp);
-    for (mut row, (pr, dr)) in dz.row_iter_mut().zip(p.row_iter().zip(dp.row_iter())) {
-        let dot = pr.dot(&dr);
-        for (o, pv) in row.iter_mut().zip(pr.iter()) {
-            *o -= pv * dot;
+    let rows = p.nrows();
+    for (o, (pc, dc)) in dz.as_mut_slice().chunks_exact_mut(rows).zip(
+        p.as_slice()
+            .chunks_exact(rows)
+            .zip(dp.as_slice().chunks_exact(rows)),
+    ) {
+        let dot: f64 = pc.iter().zip(dc).map(|(a, b)| a * b).sum();
+        for (v, pv) in o.iter_mut().zip(pc) {
+            *v = (*v - pv * dot) / tau;
         }
     }
-    dz / tau
+    dz
 }
 
 /// `diag(w) m`.
@@ -134,24 +147,34 @@ pub fn coupling(
 ) -> CouplingGrad {
     let sx = sample(x);
     let sy = sample(y);
-    // Cosine similarity, sampled x by sampled y.
-    let sim = &sx.normalized * sy.normalized.transpose();
-    let p_xy = softmax_rows(&sim, tau);
-    let p_yx = softmax_rows(&sim.transpose(), tau);
+    // Cosine similarity, sampled x by sampled y, and its transpose: the
+    // soft maps are column softmaxes of these (columns are contiguous),
+    // q_yx = P_yxᵀ (n_x x n_y) and q_xy = P_xyᵀ (n_y x n_x).
+    let sim = mul(&sx.normalized, N, &sy.normalized, T);
+    let sim_t = mul(&sy.normalized, N, &sx.normalized, T);
+    let q_yx = softmax_columns(&sim, tau);
+    let q_xy = softmax_columns(&sim_t, tau);
+    drop((sim, sim_t));
     let wphi_x = scale_rows(&sx.basis, &sx.weights);
     let wphi_y = scale_rows(&sy.basis, &sy.weights);
-    let est_xy = wphi_y.transpose() * (&p_yx * &sx.basis);
-    let est_yx = wphi_x.transpose() * (&p_xy * &sy.basis);
+    // est_xy = (W Φ_y)ᵀ P_yx Φ_x = (q_yx W Φ_y)ᵀ Φ_x.
+    let est_xy = mul(&mul(&q_yx, N, &wphi_y, N), T, &sx.basis, N);
+    let est_yx = mul(&mul(&q_xy, N, &wphi_x, N), T, &sy.basis, N);
     let e1 = c_xy - est_xy;
     let e2 = c_yx - est_yx;
     let loss = e1.norm_squared() + e2.norm_squared();
-    // d loss / d est = −2 E; est_xy = (W Φ_y)ᵀ P_yx Φ_x.
-    let dp_yx = (&wphi_y * &e1) * sx.basis.transpose() * -2.0;
-    let dp_xy = (&wphi_x * &e2) * sy.basis.transpose() * -2.0;
-    let dsim = softmax_rows_backward(&p_xy, &dp_xy, tau)
-        + softmax_rows_backward(&p_yx, &dp_yx, tau).transpose();
-    let dg_x = &dsim * &sy.normalized;
-    let dg_y = dsim.transpose() * &sx.normalized;
+    // d loss / d est = −2 E: dP_yx = −2 W Φ_y E₁ Φ_xᵀ, so
+    // dq_yx = −2 Φ_x E₁ᵀ (W Φ_y)ᵀ.
+    let dq_yx = mul(&mul(&sx.basis, N, &e1, T), N, &wphi_y, T) * -2.0;
+    let dq_xy = mul(&mul(&sy.basis, N, &e2, T), N, &wphi_x, T) * -2.0;
+    // d sim = dz_yx + dz_xyᵀ (n_x x n_y).
+    let dz_yx = softmax_columns_backward(&q_yx, &dq_yx, tau);
+    let dz_xy = softmax_columns_backward(&q_xy, &dq_xy, tau);
+    drop((q_yx, q_xy, dq_yx, dq_xy));
+    let mut dg_x = mul(&dz_yx, N, &sy.normalized, N);
+    mul_add(&mut dg_x, 1.0, &dz_xy, T, &sy.normalized, N);
+    let mut dg_y = mul(&dz_yx, T, &sx.normalized, N);
+    mul_add(&mut dg_y, 1.0, &dz_xy, N, &sx.normalized, N);
     CouplingGrad {
         loss,
         features_x: unnormalize(&sx, &dg_x, x.features.shape()),
