@@ -535,16 +535,35 @@ fn save_curve(path: &Path, history: &[StepRecord]) -> anyhow::Result<()> {
         });
     }
     let last = history.last().map_or(1.0, |r| r.step as f64).max(1.0);
-    let ymax = if ymax > 0.0 { ymax * 1.05 } else { 1.0 };
-    let ticks = |max: f64| (0..=5).map(|i| max * i as f64 / 5.0).collect::<Vec<_>>();
+    // Ticks at multiples of 1, 2 or 5 times a power of ten, the axis
+    // ending on one.
+    let nice = |max: f64| {
+        let raw = max.max(1e-12) / 5.0;
+        let p = 10f64.powf(raw.log10().floor());
+        let step = [1.0, 2.0, 5.0, 10.0]
+            .into_iter()
+            .map(|m| m * p)
+            .find(|&s| s >= raw)
+            .unwrap_or(10.0 * p);
+        let top = (max / step).ceil().max(1.0) * step;
+        (top, step)
+    };
+    let (ymax, ystep) = nice(ymax);
+    let (xmax, xstep) = nice(last);
+    let ticks = |max: f64, step: f64| {
+        (0..)
+            .map(|i| i as f64 * step)
+            .take_while(|&t| t <= max + step * 1e-9)
+            .collect::<Vec<_>>()
+    };
     let plot = Plot {
         title: "training losses (window means)",
         x_label: "step",
         y_label: "loss",
-        x_range: (0.0, last),
+        x_range: (0.0, xmax),
         y_range: (0.0, ymax),
-        x_ticks: ticks(last),
-        y_ticks: ticks(ymax),
+        x_ticks: ticks(xmax, xstep),
+        y_ticks: ticks(ymax, ystep),
     };
     let png = line_plot(&plot, &series).to_png()?;
     fmaps::mesh_io::atomic::write_atomically(path, |w| w.write_all(&png))?;
