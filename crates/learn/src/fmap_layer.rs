@@ -15,9 +15,37 @@
 //! `c_i (A Aᵀ + λ diag(mask_i)) = b_i Aᵀ` (`b_i` row i of B), all rows
 //! independently.
 
+use faer::linalg::solvers::{Llt, Solve};
 use nalgebra::{DMatrix, DVector};
+use rayon::prelude::*;
 
+use crate::gemm::Op::{N, T};
+use crate::gemm::{mul, mul_add};
 use crate::{Error, Result};
+
+/// What the forward pass keeps for the backward pass: the factors of the
+/// rows' systems and C.
+pub struct FmapTape {
+    factors: Vec<Llt<f64>>,
+    c: DMatrix<f64>,
+}
+
+impl std::fmt::Debug for FmapTape {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "FmapTape({} factors)", self.factors.len())
+    }
+}
+
+/// `S⁻¹ v` from the factor of S.
+fn solve(f: &Llt<f64>, v: impl ExactSizeIterator<Item = f64>) -> Vec<f64> {
+    let n = v.len();
+    let mut x = faer::Mat::<f64>::zeros(n, 1);
+    for (i, value) in v.enumerate() {
+        x[(i, 0)] = value;
+    }
+    f.solve_in_place(x.as_mut());
+    (0..n).map(|i| x[(i, 0)]).collect()
+}
 
 /// The layer's parameters.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -38,16 +66,23 @@ impl Default for FmapLayer {
 }
 
 impl FmapLayer {
-    /// The systems `A Aᵀ + λ diag(mask_i)`, one per row of C.
-    fn systems(&self, a: &DMatrix<f64>, mask: &DMatrix<f64>) -> Vec<DMatrix<f64>> {
-        let aat = a * a.transpose();
+    /// The Cholesky factors of the systems `A Aᵀ + λ diag(mask_i)`, one
+    /// per row of C (in parallel over the rows).
+    fn factors(&self, a: &DMatrix<f64>, mask: &DMatrix<f64>) -> Result<Vec<Llt<f64>>> {
+        let aat = mul(a, N, a, T);
+        let k = aat.nrows();
         (0..mask.nrows())
+            .into_par_iter()
             .map(|i| {
-                let mut s = aat.clone();
-                for j in 0..mask.ncols() {
-                    s[(j, j)] += self.lambda * mask[(i, j)];
-                }
-                s
+                let s = faer::Mat::from_fn(k, k, |r, c| {
+                    aat[(r, c)]
+                        + if r == c {
+                            self.lambda * mask[(i, r)]
+                        } else {
+                            0.0
+                        }
+                });
+                s.llt(faer::Side::Lower).map_err(|_| singular())
             })
             .collect()
     }
@@ -64,16 +99,29 @@ impl FmapLayer {
         evals_a: &DVector<f64>,
         evals_b: &DVector<f64>,
     ) -> Result<DMatrix<f64>> {
+        Ok(self.forward_tape(a, b, evals_a, evals_b)?.0)
+    }
+
+    /// [`forward`](Self::forward) keeping the factors for
+    /// [`backward_tape`](Self::backward_tape).
+    pub fn forward_tape(
+        &self,
+        a: &DMatrix<f64>,
+        b: &DMatrix<f64>,
+        evals_a: &DVector<f64>,
+        evals_b: &DVector<f64>,
+    ) -> Result<(DMatrix<f64>, FmapTape)> {
         self.check(a, b, evals_a, evals_b)?;
         let mask = fmaps_solve::resolvent_mask(evals_a, evals_b, self.gamma);
-        let rhs = b * a.transpose();
-        let mut c = DMatrix::zeros(b.nrows(), a.nrows());
-        for (i, s) in self.systems(a, &mask).into_iter().enumerate() {
-            let chol = s.cholesky().ok_or_else(singular)?;
-            let row = chol.solve(&rhs.row(i).transpose());
-            c.row_mut(i).copy_from(&row.transpose());
-        }
-        Ok(c)
+        let rhs = mul(b, N, a, T);
+        let factors = self.factors(a, &mask)?;
+        let rows: Vec<Vec<f64>> = factors
+            .par_iter()
+            .enumerate()
+            .map(|(i, f)| solve(f, rhs.row(i).iter().copied()))
+            .collect();
+        let c = DMatrix::from_fn(b.nrows(), a.nrows(), |i, j| rows[i][j]);
+        Ok((c.clone(), FmapTape { factors, c }))
     }
 
     /// Given `dc` = d loss / d C: d loss / d `a` and d loss / d `b`.
@@ -85,26 +133,36 @@ impl FmapLayer {
         evals_b: &DVector<f64>,
         dc: &DMatrix<f64>,
     ) -> Result<(DMatrix<f64>, DMatrix<f64>)> {
-        self.check(a, b, evals_a, evals_b)?;
-        let mask = fmaps_solve::resolvent_mask(evals_a, evals_b, self.gamma);
-        let rhs = b * a.transpose();
-        let (ka, p) = a.shape();
-        let mut d_rhs = DMatrix::zeros(b.nrows(), ka);
-        let mut d_s_sum = DMatrix::zeros(ka, ka);
-        for (i, s) in self.systems(a, &mask).into_iter().enumerate() {
-            let chol = s.cholesky().ok_or_else(singular)?;
-            // c_i = r_i S⁻¹ (S symmetric): with u = S⁻¹ g_iᵀ, dr_i = uᵀ
-            // and dS = −(u c_i)ᵀ = −c_iᵀ uᵀ.
-            let c_i = chol.solve(&rhs.row(i).transpose());
-            let u = chol.solve(&dc.row(i).transpose());
-            d_rhs.row_mut(i).copy_from(&u.transpose());
-            d_s_sum -= &c_i * u.transpose();
-        }
+        let (_, tape) = self.forward_tape(a, b, evals_a, evals_b)?;
+        Ok(self.backward_tape(a, b, &tape, dc))
+    }
+
+    /// [`backward`](Self::backward) from the tape of the forward pass on
+    /// the same `a` and `b`.
+    pub fn backward_tape(
+        &self,
+        a: &DMatrix<f64>,
+        b: &DMatrix<f64>,
+        tape: &FmapTape,
+        dc: &DMatrix<f64>,
+    ) -> (DMatrix<f64>, DMatrix<f64>) {
+        let ka = a.nrows();
+        // c_i = r_i S⁻¹ (S symmetric): with u = S⁻¹ g_iᵀ, dr_i = uᵀ and
+        // dS = −(u c_i)ᵀ = −c_iᵀ uᵀ.
+        let us: Vec<Vec<f64>> = tape
+            .factors
+            .par_iter()
+            .enumerate()
+            .map(|(i, f)| solve(f, dc.row(i).iter().copied()))
+            .collect();
+        let d_rhs = DMatrix::from_fn(b.nrows(), ka, |i, j| us[i][j]);
+        // Σ_i −c_iᵀ u_iᵀ = −Cᵀ U (U = d_rhs).
+        let d_s_sum = mul(&tape.c, T, &d_rhs, N) * -1.0;
         // rhs = B Aᵀ; every S contains A Aᵀ.
-        let db = &d_rhs * a;
-        let da = d_rhs.transpose() * b + (&d_s_sum + d_s_sum.transpose()) * a;
-        debug_assert_eq!(da.shape(), (ka, p));
-        Ok((da, db))
+        let db = mul(&d_rhs, N, a, N);
+        let mut da = mul(&d_rhs, T, b, N);
+        mul_add(&mut da, 1.0, &(&d_s_sum + d_s_sum.transpose()), N, a, N);
+        (da, db)
     }
 
     fn check(

@@ -54,8 +54,8 @@ fn training_on_one_pair_fits_it() {
     recipe.steps = 400;
     recipe.fmap_eigenpairs = 20;
     recipe.coupling_samples = Some(300);
-    recipe.lr = 1e-2;
-    recipe.lr_min = 1e-3;
+    recipe.lr = 5e-3;
+    recipe.lr_min = 5e-4;
     recipe.dropout = false;
     let model = Model::new(arch, pre, 5);
     let shapes: Vec<TrainShape> = [("rest", &pair.source), ("walking", &pair.target)]
@@ -76,8 +76,10 @@ fn training_on_one_pair_fits_it() {
     );
     let after = map_error(&t.model, &pair);
     eprintln!("loss {first:.3} -> {last:.3}; map error {before:.4} -> {after:.4}");
-    // Measured: loss 61 -> 9, error 0.21 -> 0.03 (an untrained network's
-    // map is near random on this creature).
+    // Measured: loss 63 -> 8, error 0.21 -> 0.025 (an untrained network's
+    // map is near random on this creature); over six seeds of weights and
+    // draws at most 14 and 0.073, so the bounds hold whatever the
+    // rounding of the CPU's kernels.
     assert!(last < 0.5 * first, "loss {first} -> {last}");
     assert!(after < 0.5 * before, "map error {before} -> {after}");
 }

@@ -367,8 +367,8 @@ pub fn pair_loss_of<N: FeatureNet>(
     let layer = recipe.layer();
     let (sx, sy) = (x.fmap_spectrum(), y.fmap_spectrum());
     let (a, b) = (sx.project(&fx), sy.project(&fy));
-    let c_xy = layer.forward(&a, &b, &x.fmap_evals, &y.fmap_evals)?;
-    let c_yx = layer.forward(&b, &a, &y.fmap_evals, &x.fmap_evals)?;
+    let (c_xy, tape_xy) = layer.forward_tape(&a, &b, &x.fmap_evals, &y.fmap_evals)?;
+    let (c_yx, tape_yx) = layer.forward_tape(&b, &a, &y.fmap_evals, &x.fmap_evals)?;
     let w = recipe.weights;
     let mut values = LossValues::default();
     let (bij, mut d_xy, mut d_yx) = losses::bijectivity(&c_xy, &c_yx);
@@ -419,8 +419,8 @@ pub fn pair_loss_of<N: FeatureNet>(
         dfy += g.features_y * w.coupling;
     }
     values.total = values.bijectivity + values.orthogonality + values.laplacian + values.coupling;
-    let (da1, db1) = layer.backward(&a, &b, &x.fmap_evals, &y.fmap_evals, &d_xy)?;
-    let (db2, da2) = layer.backward(&b, &a, &y.fmap_evals, &x.fmap_evals, &d_yx)?;
+    let (da1, db1) = layer.backward_tape(&a, &b, &tape_xy, &d_xy);
+    let (db2, da2) = layer.backward_tape(&b, &a, &tape_yx, &d_yx);
     dfx += sx.project_backward(&(da1 + da2));
     dfy += sy.project_backward(&(db1 + db2));
     let (mut grad, grad_y) = rayon::join(
