@@ -94,7 +94,9 @@ pub struct Preprocessing {
     pub input: Input,
     /// Eigenpairs of the spectral diffusion (and of the WKS input).
     pub eigenpairs: usize,
-    /// The gradient operators' ridge regularisation.
+    /// The gradient operators' ridge regularisation (recorded in the
+    /// file; this crate computes the operators with
+    /// [`GRAD_REGULARIZATION`] and refuses a model made with another).
     pub gradient_regularization: f64,
 }
 
@@ -169,6 +171,7 @@ impl Model {
     /// The operators (with `eigenpairs` eigenpairs, at least the model's)
     /// and the input of `mesh`.
     pub fn prepare(&self, mesh: &TriMesh, eigenpairs: usize) -> Result<Prepared> {
+        self.check_preprocessing()?;
         let (unit, _) = mesh.to_unit_area()?;
         let k = eigenpairs.max(self.preprocessing.eigenpairs);
         let operators = ShapeOperators::compute(&unit, k)?;
@@ -185,6 +188,7 @@ impl Model {
         eigenpairs: usize,
         cache: &Path,
     ) -> Result<Prepared> {
+        self.check_preprocessing()?;
         let (unit, _) = mesh.to_unit_area()?;
         let k = eigenpairs.max(self.preprocessing.eigenpairs);
         let key = ShapeOperators::key(&unit, k);
@@ -197,6 +201,16 @@ impl Model {
         let (operators, _) = ShapeOperators::cached(&unit, k, &file)?;
         let input = self.input(&unit, &operators)?;
         Ok(Prepared { operators, input })
+    }
+
+    fn check_preprocessing(&self) -> Result<()> {
+        let r = self.preprocessing.gradient_regularization;
+        if r != GRAD_REGULARIZATION {
+            return Err(Error::Parameter(format!(
+                "gradient regularisation {r}: this fmaps computes the operators with {GRAD_REGULARIZATION}"
+            )));
+        }
+        Ok(())
     }
 
     /// The input features ([`Input`]) of a mesh scaled to unit area,
@@ -329,6 +343,12 @@ impl Model {
         }
         if a.blocks > 64 || a.outputs > 4096 || p.eigenpairs == 0 || p.eigenpairs > 4096 {
             return Err(format!("architecture {a:?} / {p:?} out of range"));
+        }
+        if p.gradient_regularization != GRAD_REGULARIZATION {
+            return Err(format!(
+                "gradient operators regularised by {}; this fmaps computes them with {GRAD_REGULARIZATION}",
+                p.gradient_regularization
+            ));
         }
         if p.input == Input::Xyz && a.inputs != 3 {
             return Err(format!("{} inputs for vertex coordinates", a.inputs));
