@@ -191,7 +191,8 @@ pub struct TrainShape {
     ops: ShapeOperators,
     input: DMatrix<f64>,
     fmap_evals: DVector<f64>,
-    fmap_evecs: DMatrix<f64>,
+    /// The maps' eigenvectors when fewer than the operators' (else those).
+    fmap_evecs: Option<DMatrix<f64>>,
 }
 
 impl TrainShape {
@@ -218,7 +219,8 @@ impl TrainShape {
         TrainShape {
             name: name.to_string(),
             fmap_evals: ops.eigenvalues.rows(0, k).into_owned(),
-            fmap_evecs: ops.eigenvectors.columns(0, k).into_owned(),
+            fmap_evecs: (k < ops.eigenvectors.ncols())
+                .then(|| ops.eigenvectors.columns(0, k).into_owned()),
             ops,
             input,
         }
@@ -236,13 +238,17 @@ impl TrainShape {
 
     /// The functional maps' eigenvalues and eigenvectors.
     pub fn fmap_basis(&self) -> (&DVector<f64>, &DMatrix<f64>) {
-        (&self.fmap_evals, &self.fmap_evecs)
+        (&self.fmap_evals, self.fmap_evecs())
+    }
+
+    fn fmap_evecs(&self) -> &DMatrix<f64> {
+        self.fmap_evecs.as_ref().unwrap_or(&self.ops.eigenvectors)
     }
 
     fn fmap_spectrum(&self) -> Spectrum<'_> {
         Spectrum {
             eigenvalues: &self.fmap_evals,
-            eigenvectors: &self.fmap_evecs,
+            eigenvectors: self.fmap_evecs(),
             mass: &self.ops.mass,
         }
     }
@@ -400,7 +406,7 @@ pub fn pair_loss_of<N: FeatureNet>(
         ) -> CouplingShape<'a> {
             CouplingShape {
                 features: f,
-                eigenvectors: &s.fmap_evecs,
+                eigenvectors: s.fmap_evecs(),
                 mass: &s.ops.mass,
                 vertices: v,
             }
