@@ -436,14 +436,19 @@ pub(crate) fn tensor_npy(shape: &[usize], values: &[f64]) -> Result<Vec<u8>> {
     Ok(buf)
 }
 
-/// Writes an archive of `entries` to `path` by the output policy of
-/// [`fmaps_mesh_io::atomic`].
-pub(crate) fn write_entries(path: &Path, entries: &[(String, Vec<u8>)]) -> Result<()> {
+/// The archive of named `entries` written to `w`.
+pub(crate) fn archive_to(w: &mut dyn Write, entries: &[(String, Vec<u8>)]) -> std::io::Result<()> {
     let refs: Vec<(&str, &[u8])> = entries
         .iter()
         .map(|(n, d)| (n.as_str(), d.as_slice()))
         .collect();
-    fmaps_mesh_io::atomic::write_atomically(path, |w: &mut dyn Write| npz::write_archive(w, &refs))
+    npz::write_archive(w, &refs)
+}
+
+/// Writes an archive of `entries` to `path` by the output policy of
+/// [`fmaps_mesh_io::atomic`].
+pub(crate) fn write_entries(path: &Path, entries: &[(String, Vec<u8>)]) -> Result<()> {
+    fmaps_mesh_io::atomic::write_atomically(path, |w: &mut dyn Write| archive_to(w, entries))
         .map_err(|e| Error::Write {
             path: path.to_path_buf(),
             source: e,
@@ -474,16 +479,8 @@ mod tests {
     fn file_round_trip() {
         let mut m = small();
         m.provenance.insert("command".into(), "fmaps train".into());
-        let bytes = {
-            let entries = m.entries(Vec::new()).unwrap();
-            let refs: Vec<(&str, &[u8])> = entries
-                .iter()
-                .map(|(n, d)| (n.as_str(), d.as_slice()))
-                .collect();
-            let mut out = Vec::new();
-            npz::write_archive(&mut out, &refs).unwrap();
-            out
-        };
+        let mut bytes = Vec::new();
+        archive_to(&mut bytes, &m.entries(Vec::new()).unwrap()).unwrap();
         let back = Model::parse(&bytes).unwrap();
         assert_eq!(back, m);
         let entries = npz::read_archive(&bytes).unwrap();
@@ -503,12 +500,8 @@ mod tests {
         let archive = |edit: &dyn Fn(&mut Entries)| {
             let mut entries = m.entries(Vec::new()).unwrap();
             edit(&mut entries);
-            let refs: Vec<(&str, &[u8])> = entries
-                .iter()
-                .map(|(n, d)| (n.as_str(), d.as_slice()))
-                .collect();
             let mut out = Vec::new();
-            npz::write_archive(&mut out, &refs).unwrap();
+            archive_to(&mut out, &entries).unwrap();
             Model::parse(&out).unwrap_err()
         };
         let meta_with = |text: String| {
