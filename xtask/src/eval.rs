@@ -21,7 +21,9 @@ use crate::util::{bcicp_dir, collections_or_default, root};
 pub struct Args {
     /// Collections to evaluate (default: FAUST and TOSCA_Isometric); also
     /// the FAUST splits `FAUST_r` (tr_reg_080..099, all 190 pairs) and
-    /// `FAUST_inter` (the test pairs of two different people); and the
+    /// `FAUST_inter` (the test pairs of two different people),
+    /// `FAUST_r_ordered` (every ordered pair of tr_reg_080..099, the 20
+    /// self-pairs included: the learned papers' 400 pairs); and the
     /// generated bodies (`cargo xtask generate`, built on demand):
     /// `generated-iso` (one individual, two poses) and `generated-noniso`
     /// (two individuals of different proportions).
@@ -129,6 +131,12 @@ impl MapSource {
         method: &str,
         peer_dir: &std::path::Path,
     ) -> anyhow::Result<MapSource> {
+        if let Some(params) = crate::learn::learned_method(method)? {
+            return Ok(MapSource::Pipeline(Box::new(PipelineCache {
+                params,
+                shapes: HashMap::new(),
+            })));
+        }
         if let Some((refine, starts, restart_below)) = pipeline_method(method)? {
             // As `fmaps match`: the stop of the starts, and the eigenpairs
             // the pipeline uses.
@@ -329,7 +337,7 @@ impl PipelineCache {
 /// step 5), `zoomout:START:FINAL:STEP`, `icp` (10 iterations at k = 50),
 /// `bijective-zoomout` or `discrete` (discrete optimisation presets, 50 ->
 /// 150 step 5).
-fn refiner_method(refiner: &str) -> anyhow::Result<fmaps::pipeline::Refinement> {
+pub(crate) fn refiner_method(refiner: &str) -> anyhow::Result<fmaps::pipeline::Refinement> {
     use fmaps::pipeline::Refinement;
     Ok(match refiner {
         "zoomout" => Refinement::default_zoomout(),
@@ -514,6 +522,17 @@ pub(crate) fn collection_pairs(
                     pairs.push((a.clone(), b.clone()));
                 }
             }
+            Ok((c, pairs))
+        }
+        "FAUST_r_ordered" => {
+            // The learned papers' protocol: every ordered pair of the test
+            // shapes, the 20 self-pairs included (400 pairs).
+            let c = Collection::open(bcicp, "FAUST")?;
+            let shapes: Vec<String> = (80..100).map(|i| format!("tr_reg_{i:03}")).collect();
+            let pairs = shapes
+                .iter()
+                .flat_map(|a| shapes.iter().map(move |b| (a.clone(), b.clone())))
+                .collect();
             Ok((c, pairs))
         }
         "FAUST_inter" => {

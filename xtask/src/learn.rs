@@ -315,3 +315,49 @@ pub fn learn_parity(args: &ParityArgs) -> anyhow::Result<()> {
     );
     Ok(())
 }
+
+/// `learned[:KEY=VALUE,..]`: the pipeline with learned features (the
+/// shipped model unless `model=PATH`), keys `adapt=N` (test-time
+/// adaptation steps), `lr=X` (their learning rate), `map=features|spectral`
+/// (the initial point map), `k=K` (the map's size, 50), `refine=REFINER`
+/// (a refiner of `REFINER@PUBLISHED`, or `default` for what `fmaps match`
+/// runs by default; none without); `None` for other methods.
+pub(crate) fn learned_method(method: &str) -> anyhow::Result<Option<fmaps::MatchParams>> {
+    use fmaps::pipeline::{Features, LearnedFeatures, Refinement};
+    let Some(rest) = method.strip_prefix("learned") else {
+        return Ok(None);
+    };
+    let list = match rest.strip_prefix(':') {
+        Some(l) => l,
+        None if rest.is_empty() => "",
+        None => return Ok(None),
+    };
+    let mut learned = LearnedFeatures::shipped()?;
+    let mut params = fmaps::MatchParams::unrefined();
+    for kv in list.split(',').filter(|s| !s.is_empty()) {
+        let (k, v) = kv
+            .split_once('=')
+            .with_context(|| format!("{method}: expected KEY=VALUE, got '{kv}'"))?;
+        match k {
+            "model" => {
+                learned.model = std::sync::Arc::new(
+                    fmaps::learn::model::Model::load(v).with_context(|| method.to_string())?,
+                )
+            }
+            "adapt" => learned.adaptation.steps = v.parse().with_context(|| kv.to_string())?,
+            "lr" => learned.adaptation.lr = v.parse().with_context(|| kv.to_string())?,
+            "map" => learned.point_map = v.parse().map_err(anyhow::Error::msg)?,
+            "k" => params.k = v.parse().with_context(|| kv.to_string())?,
+            "refine" => {
+                params.refinement = match v {
+                    "default" => Refinement::recommended(),
+                    r => crate::eval::refiner_method(r)?,
+                }
+            }
+            _ => anyhow::bail!("{method}: unknown key '{k}' (model, adapt, lr, map, k, refine)"),
+        }
+    }
+    params.features = Features::Learned(learned);
+    params.k_process = params.k_process_needed();
+    Ok(Some(params))
+}

@@ -11,6 +11,7 @@ use fmaps::laplacian::MassKind;
 use fmaps::mesh_io::{self, TriMesh};
 use fmaps::{Backend, SpectrumParams};
 use serde_json::json;
+use std::sync::Arc;
 
 mod batch;
 mod demo;

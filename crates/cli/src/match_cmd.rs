@@ -89,6 +89,31 @@ pub(crate) struct MatchArgs {
     /// it.
     #[arg(long)]
     non_isometric: bool,
+    /// Where the per-vertex features come from: `descriptors` (spectral
+    /// descriptors and the functional-map energy), `learned` (the
+    /// DiffusionNet model shipped with fmaps, trained without labels on
+    /// the FAUST training shapes) or `learned=MODEL` (a model file of
+    /// `fmaps train`). With learned features and no refinement flag, the
+    /// learned map is pulled back at size 100 (unless -k says otherwise)
+    /// and refined by ZoomOut to 200 in steps of 20 (the most accurate of
+    /// the refinements measured from it, docs/benchmarks.md).
+    #[arg(
+        long,
+        default_value = "descriptors",
+        value_name = "descriptors|learned[=MODEL]"
+    )]
+    features: String,
+    /// With learned features: adapt the model to the pair first, by N
+    /// steps of its unsupervised training losses on these two shapes (the
+    /// model file is not changed).
+    #[arg(long, value_name = "N")]
+    adapt: Option<usize>,
+    /// With learned features: read the initial point map off the
+    /// features (`features`: the most similar target vertex, default) or
+    /// off their functional map (`spectral`: the regularised layer the
+    /// network was trained with, size -k, then the spectral embedding).
+    #[arg(long, value_name = "features|spectral")]
+    point_map: Option<fmaps::pipeline::LearnedPointMap>,
     /// Keep the meshes' own units: no scaling to unit area before the
     /// eigenbases (by default each shape is scaled to unit area, so that
     /// the map does not depend on the units of either mesh).
@@ -242,11 +267,15 @@ pub(crate) fn read_landmarks(path: &Path) -> Result<mesh_io::Landmarks, Failure>
 fn refinement(
     args: &MatchArgs,
     (n_a, n_b): (usize, usize),
+    learned: bool,
 ) -> (fmaps::pipeline::RefinerKind, fmaps::pipeline::RefineOptions) {
     use fmaps::pipeline::RefinerKind;
     let kind = match (args.refine, &args.refiner.zoomout) {
         (Some(k), _) => k,
         (None, Some(_)) => RefinerKind::Zoomout,
+        (None, None) if learned && RefinerKind::default_for(n_a.min(n_b)) != RefinerKind::None => {
+            RefinerKind::Zoomout
+        }
         (None, None) => RefinerKind::default_for(n_a.min(n_b)),
     };
     let options = args
@@ -280,7 +309,16 @@ pub(crate) fn params_of(args: &MatchArgs, sizes: (usize, usize)) -> Result<Match
     params.energy.orient_reversing = args.mirrored;
     params.adjoint = args.refiner.adjoint;
     params.area_normalize = !args.no_area_normalize;
-    let (kind, options) = refinement(args, sizes);
+    let learned = learned_features(args)?;
+    let (kind, mut options) = refinement(args, sizes, learned.is_some());
+    if learned.is_some() && args.refine.is_none() && args.refiner.zoomout.is_none() {
+        use fmaps::pipeline::LearnedFeatures;
+        if args.k == defaults().k {
+            params.k = LearnedFeatures::DEFAULT_K;
+        }
+        options.k = params.k;
+        options.schedule = Some(LearnedFeatures::default_schedule(params.k));
+    }
     params
         .set_refinement(kind, &options)
         .map_err(zoomout_failure)?;
@@ -306,6 +344,17 @@ pub(crate) fn params_of(args: &MatchArgs, sizes: (usize, usize)) -> Result<Match
             }
         },
     };
+    if let Some(l) = learned {
+        // The learned map is one start: the starts vary the descriptor
+        // solve's size.
+        if args.starts.is_some() {
+            return Err(input(anyhow::anyhow!(
+                "--starts varies the descriptor solve: learned features give one start"
+            )));
+        }
+        params.starts.sizes.clear();
+        params.features = fmaps::pipeline::Features::Learned(l);
+    }
     params.starts.select = match args.select {
         SelectKind::Conformal => StartSelection::Conformal,
         SelectKind::Orientation => StartSelection::Orientation,
@@ -316,6 +365,44 @@ pub(crate) fn params_of(args: &MatchArgs, sizes: (usize, usize)) -> Result<Match
         None => params.k_process_needed(),
     };
     Ok(params)
+}
+
+/// The learned features `--features`, `--adapt` and `--point-map` ask
+/// for (`None`: descriptors).
+fn learned_features(args: &MatchArgs) -> Result<Option<fmaps::pipeline::LearnedFeatures>, Failure> {
+    use fmaps::pipeline::LearnedFeatures;
+    let mut learned = match args.features.split_once('=') {
+        None if args.features == "descriptors" => None,
+        None if args.features == "learned" => Some(LearnedFeatures::shipped().map_err(runtime)?),
+        Some(("learned", file)) if !file.is_empty() => {
+            let model = fmaps::learn::model::Model::load(file).map_err(input)?;
+            Some(LearnedFeatures::new(Arc::new(model)))
+        }
+        _ => {
+            return Err(input(anyhow::anyhow!(
+                "--features '{}': expected descriptors, learned or learned=MODEL",
+                args.features
+            )));
+        }
+    };
+    match &mut learned {
+        Some(l) => {
+            if let Some(n) = args.adapt {
+                l.adaptation.steps = n;
+            }
+            if let Some(m) = args.point_map {
+                l.point_map = m;
+            }
+        }
+        None => {
+            if args.adapt.is_some() || args.point_map.is_some() {
+                return Err(input(anyhow::anyhow!(
+                    "--adapt and --point-map apply to learned features (--features learned)"
+                )));
+            }
+        }
+    }
+    Ok(learned)
 }
 
 /// Parses `--starts`: `none` (a single start) or sizes `K1,K2,..` (each at
@@ -427,6 +514,14 @@ pub(crate) fn match_cmd(args: &MatchArgs) -> Result<(), Failure> {
             "target": args.target.display().to_string(),
             "n_source": a.n_vertices(), "n_target": b.n_vertices(), "k": args.k,
             "area_normalized": params.area_normalize,
+            "features": match &params.features {
+                fmaps::pipeline::Features::Learned(l) => json!({
+                    "kind": "learned", "adapt": l.adaptation.steps,
+                    "point_map": l.point_map.name(),
+                    "model": args.features.strip_prefix("learned=").unwrap_or("shipped"),
+                }),
+                _ => json!({"kind": "descriptors"}),
+            },
             "input_areas": {"source": a.area(), "target": b.area()},
             "out": args.out.as_ref().map(|p| p.display().to_string()),
             "seconds": {"load": load_seconds, "spectra": r.times.spectra,

@@ -230,6 +230,29 @@ fmaps render scalar tr_reg_000.off --values dist.txt --title distance --out dist
         #[arg(long)]
         json: bool,
     },
+    /// Learned features as colours (their first three principal
+    /// components, shared by every mesh drawn): with two meshes, where
+    /// the colours agree the features agree.
+    #[command(after_help = "Examples:\n  \
+fmaps render features tr_reg_080.off tr_reg_091.off --out features.png\n  \
+fmaps render features cat0.off --model cats.npz --up z")]
+    Features {
+        /// Mesh files, drawn side by side.
+        #[arg(required = true, num_args = 1..=4)]
+        meshes: Vec<PathBuf>,
+        /// Model file of `fmaps train` (default: the model shipped with
+        /// fmaps).
+        #[arg(long)]
+        model: Option<PathBuf>,
+        /// Output PNG.
+        #[arg(long, default_value = "features.png")]
+        out: PathBuf,
+        #[command(flatten)]
+        view: ViewArgs,
+        /// Print one JSON object.
+        #[arg(long)]
+        json: bool,
+    },
 }
 
 /// The `--ply PREFIX` files of `render transfer`.
@@ -278,6 +301,12 @@ impl RenderCommand {
             RenderCommand::Embedding { mesh, out, .. } => {
                 outs.push(out.clone());
                 vec![mesh]
+            }
+            RenderCommand::Features {
+                meshes, model, out, ..
+            } => {
+                outs.push(out.clone());
+                meshes.iter().chain(model).map(PathBuf::as_path).collect()
             }
             RenderCommand::Curves { reports, out, .. } => {
                 outs.push(out.clone());
@@ -489,6 +518,37 @@ pub(crate) fn run(cmd: RenderCommand) -> Result<(), Failure> {
                 "eigenvalues".into(),
                 json!(which.map(|j| s.basis.eigenvalues[j])),
             );
+            json
+        }
+        RenderCommand::Features {
+            meshes,
+            model,
+            out,
+            view,
+            json,
+        } => {
+            let view = view.view()?;
+            let model = match &model {
+                Some(p) => fmaps::learn::model::Model::load(p).map_err(input)?,
+                None => fmaps::learn::model::Model::shipped().map_err(runtime)?,
+            };
+            let loaded = meshes
+                .iter()
+                .map(|p| load(p))
+                .collect::<Result<Vec<_>, _>>()?;
+            let features = meshes
+                .iter()
+                .zip(&loaded)
+                .map(|(p, m)| model.features(m).map_err(crate::input_on(p)))
+                .collect::<Result<Vec<_>, _>>()?;
+            let img = fmaps::pictures::features_picture(
+                &loaded.iter().collect::<Vec<_>>(),
+                &features.iter().collect::<Vec<_>>(),
+                &view,
+            )
+            .map_err(runtime)?;
+            save(&img, &out, &mut written)?;
+            extra.insert("features".into(), json!(model.architecture().outputs));
             json
         }
         RenderCommand::Curves {

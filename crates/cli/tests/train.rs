@@ -191,3 +191,132 @@ fn coordinate_inputs() {
     assert_eq!(m.architecture().inputs, 3);
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// `fmaps match --features learned`: the shipped model maps a shape to
+/// itself by the identity (a vertex's features are most similar to its
+/// own), a trained model file is taken by path, adaptation runs, `fmaps
+/// render features` draws either model's features; learned
+/// options without learned features, a model file that is not one and
+/// multi-start with learned features are refused with exit 2.
+#[test]
+fn match_with_learned_features() {
+    let dir = tmpdir("match-learned");
+    shapes(&dir);
+    let run = |extra: &[&str]| {
+        fmaps()
+            .current_dir(&dir)
+            .args([
+                "--threads",
+                "1",
+                "match",
+                "rest.off",
+                "rest.off",
+                "--out",
+                "m.map",
+            ])
+            .args(["--json"])
+            .args(extra)
+            .output()
+            .unwrap()
+    };
+    let o = run(&["--features", "learned", "--refine", "none"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(v["features"]["kind"], "learned");
+    let t = fmaps::mesh_io::read_map(dir.join("m.map")).unwrap();
+    let fixed = t.iter().enumerate().filter(|&(i, &x)| i == x).count();
+    assert!(
+        fixed as f64 >= 0.99 * t.len() as f64,
+        "{fixed} of {}",
+        t.len()
+    );
+    // The spectral point map, and the default refinement of learned maps.
+    for extra in [
+        &[
+            "--features",
+            "learned",
+            "--point-map",
+            "spectral",
+            "-k",
+            "30",
+            "--refine",
+            "none",
+        ][..],
+        &["--features", "learned"][..],
+    ] {
+        let o = run(extra);
+        assert!(o.status.success(), "{extra:?}: {}", stderr(&o));
+        let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+        assert!(v["orientation"].as_f64().unwrap() > 0.9, "{extra:?}: {v}");
+    }
+    // A model of `fmaps train`, adapted to the pair for two steps.
+    let o = train(&dir, "small.npz", &[]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let o = fmaps()
+        .current_dir(&dir)
+        .args([
+            "--threads",
+            "1",
+            "match",
+            "rest.off",
+            "walking.off",
+            "--json",
+        ])
+        .args([
+            "--features",
+            "learned=small.npz",
+            "--adapt",
+            "2",
+            "-k",
+            "16",
+            "--refine",
+            "none",
+        ])
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", stderr(&o));
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(v["features"]["adapt"], 2);
+    std::fs::write(dir.join("junk.npz"), b"not a model").unwrap();
+    // The features as colours, of the shipped model and of a file.
+    for extra in [&[][..], &["--model", "small.npz"][..]] {
+        let o = fmaps()
+            .current_dir(&dir)
+            .args([
+                "--threads",
+                "1",
+                "render",
+                "features",
+                "rest.off",
+                "walking.off",
+            ])
+            .args(["--out", "f.png", "--json"])
+            .args(extra)
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{extra:?}: {}", stderr(&o));
+        assert!(std::fs::metadata(dir.join("f.png")).unwrap().len() > 1000);
+    }
+    let o = fmaps()
+        .current_dir(&dir)
+        .args(["render", "features", "rest.off", "--model", "junk.npz"])
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert!(stderr(&o).contains("junk.npz"), "{}", stderr(&o));
+    for (extra, says) in [
+        (&["--adapt", "3"][..], "--features learned"),
+        (&["--point-map", "spectral"][..], "--features learned"),
+        (&["--features", "learned=junk.npz"][..], "junk.npz"),
+        (&["--features", "learned=absent.npz"][..], "absent.npz"),
+        (&["--features", "wks"][..], "expected descriptors, learned"),
+        (
+            &["--features", "learned", "--starts", "8,20"][..],
+            "one start",
+        ),
+    ] {
+        let o = run(extra);
+        assert_eq!(o.status.code(), Some(2), "{extra:?}: {}", stderr(&o));
+        assert!(stderr(&o).contains(says), "{extra:?}: {}", stderr(&o));
+    }
+}

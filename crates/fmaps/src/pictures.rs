@@ -159,3 +159,93 @@ pub fn spectral_embedding(
         view,
     )
 }
+
+/// Colours of per-vertex features (`features[s]`: n_s x d on shape `s`):
+/// their first three principal components (of every shape's rows
+/// together, centred) as red, green and blue, each stretched from its
+/// 1st to its 99th percentile. The components are the same on every
+/// shape, so where two shapes have similar features they have similar
+/// colours: a learned feature extractor's picture of a correspondence.
+///
+/// ```
+/// use nalgebra::DMatrix;
+/// // Features that vary along one direction only: one component, the
+/// // other two channels flat.
+/// let f = DMatrix::from_fn(100, 4, |i, j| if j == 0 { i as f64 } else { 0.0 });
+/// let c = fmaps::pictures::feature_colors(&[&f]);
+/// assert_eq!(c[0].len(), 100);
+/// assert!(c[0][0][0] < c[0][99][0] || c[0][0][0] > c[0][99][0]);
+/// ```
+pub fn feature_colors(features: &[&nalgebra::DMatrix<f64>]) -> Vec<Vec<[u8; 3]>> {
+    let d = features.iter().map(|f| f.ncols()).max().unwrap_or(0);
+    let rows: usize = features.iter().map(|f| f.nrows()).sum();
+    if d == 0 || rows == 0 || features.iter().any(|f| f.ncols() != d) {
+        return features.iter().map(|f| vec![[128; 3]; f.nrows()]).collect();
+    }
+    let mean = features.iter().fold(nalgebra::DVector::zeros(d), |m, f| {
+        m + f.row_sum().transpose()
+    }) / rows as f64;
+    let mut cov = nalgebra::DMatrix::zeros(d, d);
+    for f in features {
+        let mut c = (*f).clone();
+        for mut r in c.row_iter_mut() {
+            r -= mean.transpose();
+        }
+        cov += c.transpose() * &c;
+    }
+    let eig = nalgebra::SymmetricEigen::new(cov);
+    let mut order: Vec<usize> = (0..d).collect();
+    order.sort_by(|&i, &j| eig.eigenvalues[j].total_cmp(&eig.eigenvalues[i]));
+    let axes: Vec<nalgebra::DVector<f64>> = order
+        .iter()
+        .take(3)
+        .map(|&i| eig.eigenvectors.column(i).into_owned())
+        .collect();
+    let project = |f: &nalgebra::DMatrix<f64>, a: &nalgebra::DVector<f64>| -> Vec<f64> {
+        f.row_iter()
+            .map(|r| (r.transpose() - &mean).dot(a))
+            .collect()
+    };
+    let coords: Vec<Vec<Vec<f64>>> = features
+        .iter()
+        .map(|f| axes.iter().map(|a| project(f, a)).collect())
+        .collect();
+    let mut ranges = Vec::new();
+    for c in 0..axes.len() {
+        let mut all: Vec<f64> = coords.iter().flat_map(|s| s[c].iter().copied()).collect();
+        all.sort_by(f64::total_cmp);
+        let at = |q: f64| all[((all.len() - 1) as f64 * q).round() as usize];
+        ranges.push((at(0.01), at(0.99)));
+    }
+    coords
+        .iter()
+        .map(|s| {
+            (0..s.first().map_or(0, Vec::len))
+                .map(|i| {
+                    std::array::from_fn(|c| match ranges.get(c) {
+                        Some(&(lo, hi)) if hi > lo => {
+                            (((s[c][i] - lo) / (hi - lo)).clamp(0.0, 1.0) * 255.0).round() as u8
+                        }
+                        _ => 128,
+                    })
+                })
+                .collect()
+        })
+        .collect()
+}
+
+/// Meshes side by side, each coloured by its per-vertex features
+/// ([`feature_colors`], the components shared by all of them).
+pub fn features_picture(
+    meshes: &[&TriMesh],
+    features: &[&nalgebra::DMatrix<f64>],
+    view: &View,
+) -> fmaps_viz::Result<Image> {
+    let colors = feature_colors(features);
+    let images = meshes
+        .iter()
+        .zip(&colors)
+        .map(|(m, c)| render(m.vertices(), m.faces(), c, view))
+        .collect::<fmaps_viz::Result<Vec<_>>>()?;
+    Ok(Image::hstack(&images, WHITE))
+}

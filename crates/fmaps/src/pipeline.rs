@@ -40,8 +40,10 @@ use std::time::Instant;
 use fmaps_mesh_io::TriMesh;
 
 mod error;
+mod features;
 mod fit;
 mod from_map;
+mod learned;
 mod params;
 mod prepare;
 mod refinement;
@@ -51,10 +53,11 @@ mod single;
 mod starts;
 
 pub use error::MatchError;
+pub use features::{LearnedFeatures, LearnedPointMap, LearnedShape};
 use fit::Described;
 pub use fit::{Fit, fit_descriptors};
 pub use from_map::{RefinedMap, refine_point_map};
-pub use params::{DescriptorKind, DescriptorOptions, MatchParams, Starts};
+pub use params::{DescriptorKind, DescriptorOptions, Features, MatchParams, Starts};
 pub use prepare::{PreparedShape, prepare, prepare_with_basis, shape_descriptors};
 pub use refinement::{
     RefineOptions, RefineSampling, Refinement, RefinerKind, default_select_at, default_starts,
@@ -127,6 +130,9 @@ pub fn match_prepared(
                 params.k_process
             )));
         }
+    }
+    if let Features::Learned(l) = &params.features {
+        return learned::match_learned(a, b, l, params);
     }
     for &(x, y) in &params.descriptors.landmarks {
         if x >= a.basis.n() || y >= b.basis.n() {

@@ -30,6 +30,7 @@
 #![deny(missing_docs)]
 #![forbid(unsafe_code)]
 
+pub mod adapt;
 pub mod augment;
 pub mod coupling;
 pub mod fmap_layer;

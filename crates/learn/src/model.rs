@@ -28,6 +28,8 @@
 use std::collections::BTreeMap;
 use std::io::Write;
 use std::path::Path;
+#[cfg(feature = "shipped-model")]
+use std::path::PathBuf;
 
 use fmaps_descriptors::{WksParams, normalize_columns, wks};
 use fmaps_mesh_io::{TriMesh, npy, npz};
@@ -146,6 +148,13 @@ pub struct Prepared {
     /// The input features (n x inputs).
     pub input: DMatrix<f64>,
 }
+
+/// The shipped model's file name, as errors name it.
+#[cfg(feature = "shipped-model")]
+pub const SHIPPED_NAME: &str = "fmaps-learn/models/faust-unsupervised.npz";
+
+#[cfg(feature = "shipped-model")]
+static SHIPPED: &[u8] = include_bytes!("../models/faust-unsupervised.npz");
 
 impl Model {
     /// An untrained model of `architecture`, initialised from `seed`.
@@ -316,6 +325,27 @@ impl Model {
         let data = fmaps_mesh_io::read_bounded(path, MAX_FILE)?;
         Model::parse(&data).map_err(|m| Error::ModelFile {
             path: path.to_path_buf(),
+            problem: m,
+        })
+    }
+
+    /// The model shipped with this crate (`models/faust-unsupervised.npz`,
+    /// provenance in `models/README.md`): DiffusionNet trained without
+    /// labels on the 80 training shapes of the remeshed FAUST by
+    /// `cargo xtask train`. Its [`provenance`](Self::provenance) says how.
+    ///
+    /// Errors: none for the file this crate ships (a test reads it); the
+    /// file's own checks otherwise.
+    ///
+    /// ```
+    /// let model = fmaps_learn::model::Model::shipped()?;
+    /// assert_eq!(model.architecture().outputs, 256);
+    /// # Ok::<(), fmaps_learn::Error>(())
+    /// ```
+    #[cfg(feature = "shipped-model")]
+    pub fn shipped() -> Result<Model> {
+        Model::parse(SHIPPED).map_err(|m| Error::ModelFile {
+            path: PathBuf::from(SHIPPED_NAME),
             problem: m,
         })
     }

@@ -107,6 +107,58 @@ impl ShapeOperators {
 }
 
 impl ShapeOperators {
+    /// The operators of `mesh` around an eigenbasis computed elsewhere
+    /// (`mass`, `eigenvalues`, `eigenvectors` of its cotangent Laplacian
+    /// with lumped mass, as [`compute`](Self::compute) solves for, e.g. a
+    /// matching pipeline's): only the frames and the gradients are
+    /// computed. The features do not depend on the signs or the rotation
+    /// within an eigenspace of the given vectors.
+    ///
+    /// Errors: sizes that do not match the mesh, a vertex without a
+    /// normal.
+    ///
+    /// ```
+    /// let mesh = fmaps_shapes::icosphere(1.0, 2);
+    /// let ops = fmaps_learn::ShapeOperators::compute(&mesh, 16)?;
+    /// let again = fmaps_learn::ShapeOperators::with_basis(
+    ///     &mesh,
+    ///     ops.mass.clone(),
+    ///     ops.eigenvalues.clone(),
+    ///     ops.eigenvectors.clone(),
+    /// )?;
+    /// assert_eq!(again.grad_x, ops.grad_x);
+    /// # Ok::<(), fmaps_learn::Error>(())
+    /// ```
+    pub fn with_basis(
+        mesh: &TriMesh,
+        mass: DVector<f64>,
+        eigenvalues: DVector<f64>,
+        eigenvectors: DMatrix<f64>,
+    ) -> Result<ShapeOperators> {
+        let n = mesh.n_vertices();
+        if mass.len() != n || eigenvectors.nrows() != n || eigenvectors.ncols() != eigenvalues.len()
+        {
+            return Err(Error::Parameter(format!(
+                "a basis of {} masses, {} x {} eigenvectors and {} eigenvalues for a mesh of {n} vertices",
+                mass.len(),
+                eigenvectors.nrows(),
+                eigenvectors.ncols(),
+                eigenvalues.len()
+            )));
+        }
+        let normals = vertex_normals(mesh)?;
+        let frames = tangent_frames(&normals);
+        let (grad_x, grad_y) = gradient_operators(mesh.vertices(), &edges(mesh), &frames);
+        Ok(ShapeOperators {
+            mass,
+            eigenvalues,
+            eigenvectors,
+            frames,
+            grad_x,
+            grad_y,
+        })
+    }
+
     /// The cache key of `mesh`'s operators with `k` eigenpairs: the sizes,
     /// a 64-bit FNV-1a hash of the coordinates' and faces' bits, and the
     /// operators' version.

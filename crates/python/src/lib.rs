@@ -22,6 +22,7 @@
 //! GIL-free runner, and each is a thin call into the facade.)
 #![deny(unsafe_code)]
 
+mod learned;
 mod stages;
 
 use std::path::PathBuf;
@@ -337,7 +338,7 @@ fn indices(py: Python<'_>, v: &[usize]) -> Py<PyArray1<i64>> {
 /// defaults and the same maps for the same options, on any number of
 /// threads).
 #[pyfunction]
-#[pyo3(signature = (a, b, *, refine = "default", k = 50, k_process = None, schedule = None, landmarks = None, w_orient = None, mirrored = false, non_isometric = false, area_normalize = true, starts = None, threads = None))]
+#[pyo3(signature = (a, b, *, refine = "default", k = 50, k_process = None, schedule = None, landmarks = None, w_orient = None, mirrored = false, non_isometric = false, area_normalize = true, starts = None, features = "descriptors", model = None, adapt = 0, point_map = None, threads = None))]
 #[allow(clippy::too_many_arguments)]
 fn match_shapes(
     py: Python<'_>,
@@ -353,11 +354,18 @@ fn match_shapes(
     non_isometric: bool,
     area_normalize: bool,
     starts: Option<Vec<usize>>,
+    features: &str,
+    model: Option<PathBuf>,
+    adapt: usize,
+    point_map: Option<String>,
     threads: Option<usize>,
 ) -> PyResult<MatchResult> {
     let (ma, mb) = (Arc::clone(&a.inner), Arc::clone(&b.inner));
     let landmarks = stages::landmark_pairs(landmarks, ma.n_vertices(), mb.n_vertices())?;
     let sizes = (ma.n_vertices(), mb.n_vertices());
+    let learned = learned::learned_of(features, model, adapt, point_map.as_deref())?;
+    let (refine, k, schedule) =
+        learned::refine_for(refine, learned.is_some(), sizes.0.min(sizes.1), k, schedule);
     let mut params = params_for(
         refine,
         schedule,
@@ -372,6 +380,7 @@ fn match_shapes(
         // Further initial sizes (`[]`: one start, as pyFM runs ZoomOut).
         params.starts.sizes = s;
     }
+    learned::apply(&mut params, learned);
     // As `fmaps match`: the eigenpairs the pipeline uses, or those given
     // (at least the refinement's).
     params.k_process = match k_process {
@@ -598,6 +607,7 @@ fn _prepared_from_state(
             input_area,
             scale,
             seconds,
+            learned: None,
         }),
         area_normalize,
     })
@@ -636,7 +646,7 @@ fn prepare(
 /// `area_normalize` are the shapes'). Quality scores are computed on the
 /// prepared (unit-area) meshes.
 #[pyfunction]
-#[pyo3(signature = (a, b, *, refine = "default", k = 50, schedule = None, landmarks = None, w_orient = None, mirrored = false, non_isometric = false, starts = None, threads = None))]
+#[pyo3(signature = (a, b, *, refine = "default", k = 50, schedule = None, landmarks = None, w_orient = None, mirrored = false, non_isometric = false, starts = None, features = "descriptors", model = None, adapt = 0, point_map = None, threads = None))]
 #[allow(clippy::too_many_arguments)]
 fn match_prepared(
     py: Python<'_>,
@@ -650,9 +660,14 @@ fn match_prepared(
     mirrored: bool,
     non_isometric: bool,
     starts: Option<Vec<usize>>,
+    features: &str,
+    model: Option<PathBuf>,
+    adapt: usize,
+    point_map: Option<String>,
     threads: Option<usize>,
 ) -> PyResult<MatchResult> {
     let landmarks = stages::landmark_pairs(landmarks, a.n_vertices(), b.n_vertices())?;
+    let learned = learned::learned_of(features, model, adapt, point_map.as_deref())?;
     if a.area_normalize != b.area_normalize {
         return Err(err(
             "the two shapes were prepared with different area_normalize settings",
@@ -661,6 +676,8 @@ fn match_prepared(
     let k_process = a.k_process().min(b.k_process());
     let (pa, pb) = (Arc::clone(&a.inner), Arc::clone(&b.inner));
     let sizes = (pa.vertices.len(), pb.vertices.len());
+    let (refine, k, schedule) =
+        learned::refine_for(refine, learned.is_some(), sizes.0.min(sizes.1), k, schedule);
     let mut params = params_for(
         refine,
         schedule,
@@ -674,6 +691,7 @@ fn match_prepared(
     if let Some(s) = starts {
         params.starts.sizes = s;
     }
+    learned::apply(&mut params, learned);
     params.descriptors.landmarks = landmarks;
     let (r, quality) = run(py, threads, move || {
         let r = fmaps::pipeline::match_prepared(&pa, &pb, &params).map_err(|e| e.to_string())?;
@@ -917,6 +935,7 @@ fn _fmaps(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(render_transfer, m)?)?;
     m.add_function(wrap_pyfunction!(spectrum, m)?)?;
     m.add_function(wrap_pyfunction!(match_shapes, m)?)?;
+    m.add_function(wrap_pyfunction!(learned::train, m)?)?;
     m.add_function(wrap_pyfunction!(evaluate, m)?)?;
     m.add_function(wrap_pyfunction!(read_indices, m)?)?;
     m.add_function(wrap_pyfunction!(demo_pairs, m)?)?;

@@ -21,6 +21,10 @@ pub enum MatchError {
     /// The refinement failed.
     #[error("refinement: {0}")]
     Refine(#[from] fmaps_refine::Error),
+    /// The learned features failed (a model the shapes do not fit, an
+    /// adaptation that diverged).
+    #[error("learned features: {0}")]
+    Learned(fmaps_learn::Error),
     /// A parameter is out of range.
     #[error("invalid parameter: {0}")]
     InvalidParameter(String),

@@ -4,6 +4,7 @@
 use fmaps_solve::EnergyParams;
 
 use super::error::MatchError;
+use super::features::LearnedFeatures;
 use super::refinement::{
     DEFAULT_K, RefineOptions, Refinement, RefinerKind, default_select_at, default_starts,
     named_refinement,
@@ -47,6 +48,10 @@ pub struct MatchParams {
     pub area_normalize: bool,
     /// The descriptors the map is solved from.
     pub descriptors: DescriptorOptions,
+    /// Where the per-vertex features come from: the descriptors (default)
+    /// or a learned feature extractor, which replaces the descriptor
+    /// solve (see [`Features::Learned`]).
+    pub features: Features,
     /// The energy's terms and weights (descriptor preservation, Laplacian
     /// commutativity, descriptor commutativity, orientation).
     pub energy: EnergyParams,
@@ -56,6 +61,22 @@ pub struct MatchParams {
     pub refinement: Refinement,
     /// Multi-start: further initial sizes and how one final map is kept.
     pub starts: Starts,
+}
+
+/// The features a map is computed from.
+#[derive(Debug, Clone, Default)]
+#[non_exhaustive]
+pub enum Features {
+    /// Spectral descriptors ([`MatchParams::descriptors`]) and the
+    /// functional-map energy ([`MatchParams::energy`]), from several
+    /// starts when [`MatchParams::starts`] asks.
+    #[default]
+    Descriptors,
+    /// A learned feature extractor ([`LearnedFeatures`]): the initial map
+    /// comes from its features (the descriptors, the energy and the
+    /// starts are not used), then the refinement runs as usual. Needs the
+    /// area normalisation (the networks see unit-area shapes).
+    Learned(LearnedFeatures),
 }
 
 /// The descriptors stage: WKS or HKS from the first eigenpairs, landmark
@@ -138,6 +159,7 @@ impl Default for MatchParams {
             spectrum: SpectrumParams::default(),
             area_normalize: true,
             descriptors: DescriptorOptions::default(),
+            features: Features::Descriptors,
             energy: EnergyParams::default(),
             adjoint: false,
             refinement: Refinement::recommended(),
@@ -191,7 +213,7 @@ impl MatchParams {
     }
 
     /// The eigenpairs this pipeline uses: the largest of the descriptors'
-    /// eigenpairs, `k`, the starts and the refinement's need
+    /// eigenpairs (the learned features' with [`Features::Learned`]), `k`, the starts and the refinement's need
     /// ([`Refinement::k_needed`]). `fmaps match` computes this many when
     /// `--k-process` is not given (200 for the default Smooth Shells, 150
     /// for ZoomOut 50 → 150, 128 without refinement): eigenpairs beyond it
@@ -200,8 +222,11 @@ impl MatchParams {
     /// as from 200.
     pub fn k_process_needed(&self) -> usize {
         let starts = self.starts.sizes.iter().copied().max().unwrap_or(0);
-        self.descriptors
-            .eigenpairs
+        let features = match &self.features {
+            Features::Descriptors => self.descriptors.eigenpairs,
+            Features::Learned(l) => l.eigenpairs(),
+        };
+        features
             .max(self.k)
             .max(starts)
             .max(self.refinement.k_needed())
@@ -230,7 +255,8 @@ impl MatchParams {
                 self.k, self.k_process
             ));
         }
-        if d.eigenpairs < 2 || d.eigenpairs > self.k_process {
+        let descriptors = matches!(self.features, Features::Descriptors);
+        if descriptors && (d.eigenpairs < 2 || d.eigenpairs > self.k_process) {
             return bad(format!(
                 "the descriptors' eigenpairs ({}) must be in 2..=k_process ({})",
                 d.eigenpairs, self.k_process
@@ -275,6 +301,27 @@ impl MatchParams {
                 self.refinement.k_needed(),
                 self.k_process
             ));
+        }
+        if let Features::Learned(l) = &self.features {
+            if !self.area_normalize {
+                return bad(
+                    "learned features need the area normalisation: the networks are trained on unit-area shapes"
+                        .into(),
+                );
+            }
+            if !d.landmarks.is_empty() {
+                return bad(
+                    "landmarks are descriptors: the learned features take none (match with descriptors, or refine the learned map)"
+                        .into(),
+                );
+            }
+            let needed = l.eigenpairs();
+            if needed > self.k_process {
+                return bad(format!(
+                    "the learned features need {needed} eigenpairs (the model's and the adaptation's), more than k_process = {}",
+                    self.k_process
+                ));
+            }
         }
         let w = self.energy.weights.as_array();
         if w.iter().any(|x| !x.is_finite() || *x < 0.0) || w.iter().sum::<f64>() <= 0.0 {

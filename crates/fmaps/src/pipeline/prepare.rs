@@ -9,8 +9,11 @@ use fmaps_mesh_io::TriMesh;
 use fmaps_solve::ShapeData;
 use nalgebra::DMatrix;
 
+use std::sync::Arc;
+
 use super::error::MatchError;
-use super::params::MatchParams;
+use super::features::{LearnedShape, learned_shape};
+use super::params::{Features, MatchParams};
 use crate::{descriptors, refine, spectrum};
 
 /// One shape after the per-shape stages: reusable across pairs.
@@ -31,8 +34,13 @@ pub struct PreparedShape {
     /// The factor every coordinate was multiplied by (`1/√input_area`
     /// with the area normalization, else 1).
     pub scale: f64,
-    /// Seconds for the Laplacian and the eigenbasis.
+    /// Seconds for the Laplacian and the eigenbasis (and the learned
+    /// features, when asked).
     pub seconds: f64,
+    /// The learned features' state, when prepared for
+    /// [`Features::Learned`] (else computed by the pipeline when a learned
+    /// match needs it).
+    pub learned: Option<Arc<LearnedShape>>,
 }
 
 /// Laplacian and eigenbasis of one shape, after scaling it to unit area
@@ -95,6 +103,15 @@ pub fn prepare_with_basis(
         }
     };
     let area = basis.mass.iter().sum();
+    let learned = match &params.features {
+        Features::Learned(l) => Some(Arc::new(learned_shape(
+            mesh,
+            &basis,
+            params.spectrum.mass,
+            l,
+        )?)),
+        Features::Descriptors => None,
+    };
     Ok(PreparedShape {
         vertices: mesh.vertices().to_vec(),
         faces: mesh.faces().to_vec(),
@@ -103,6 +120,7 @@ pub fn prepare_with_basis(
         input_area,
         scale,
         seconds: t.elapsed().as_secs_f64(),
+        learned,
     })
 }
 

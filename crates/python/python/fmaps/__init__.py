@@ -48,6 +48,7 @@ from ._fmaps import (
     refine,
     render_transfer,
     spectrum,
+    train,
 )
 
 __all__ = [
@@ -73,4 +74,5 @@ __all__ = [
     "refine",
     "render_transfer",
     "spectrum",
+    "train",
 ]

@@ -94,9 +94,16 @@ def match_shapes(
     non_isometric: bool = False,
     area_normalize: bool = True,
     starts: Optional[list] = None,
+    features: str = "descriptors",
+    model: Optional[str] = None,
+    adapt: int = 0,
+    point_map: Optional[str] = None,
     threads: Optional[int] = None,
 ) -> MatchResult:
-    """The pipeline of `fmaps match`; refine: "default" (Smooth Shells), or a name of `fmaps match --refine`:
+    """The pipeline of `fmaps match`; features: "descriptors" or "learned" (the model shipped with fmaps, or the
+    model file `model` of :func:`train`; refine "default" is then ZoomOut 100:200:20 from k = 100 unless k is given,
+    as `fmaps match --features learned`);
+    adapt: test-time adaptation steps on the pair; point_map: "features" or "spectral" (`fmaps match --point-map`); refine: "default" (Smooth Shells), or a name of `fmaps match --refine`:
     "none", "icp", "zoomout", "bijective-zoomout", "discrete", "bcicp", "smooth-shells"; schedule: "START:FINAL:STEP"
     for ZoomOut and the discrete presets; landmarks: (vertex of A, vertex of B) pairs, 0-based; starts: further initial sizes ([] = one start; None = the CLI's default);
     k_process: eigenpairs computed (None: those the pipeline uses, as the CLI: 200 for Smooth Shells, 150 for ZoomOut);
@@ -121,9 +128,36 @@ def match_prepared(
     mirrored: bool = False,
     non_isometric: bool = False,
     starts: Optional[list] = None,
+    features: str = "descriptors",
+    model: Optional[str] = None,
+    adapt: int = 0,
+    point_map: Optional[str] = None,
     threads: Optional[int] = None,
 ) -> MatchResult:
     """`match_shapes` on prepared shapes (the same maps)."""
+
+def train(
+    meshes: list,
+    out: str,
+    *,
+    steps: int = 1000,
+    lr: float = 1e-3,
+    seed: int = 1,
+    width: int = 128,
+    blocks: int = 4,
+    outputs: int = 256,
+    inputs: int = 128,
+    eigenpairs: int = 128,
+    fmap_k: int = 200,
+    coupling_samples: Optional[int] = 1000,
+    dropout: bool = True,
+    save_every: int = 25,
+    threads: Optional[int] = None,
+) -> list:
+    """Trains DiffusionNet without labels on `meshes` (the recipe of `fmaps train`) and writes the model file
+    `out` (for `match_shapes(..., features="learned", model=out)`); a checkpoint `out` with `.checkpoint.npz` is
+    written every `save_every` steps and a call on the same files continues from it. Returns one dict of losses
+    per step run."""
 
 class RefinedMap:
     """The result of :func:`refine`."""
