@@ -11,7 +11,6 @@ use fmaps::laplacian::MassKind;
 use fmaps::mesh_io::{self, TriMesh};
 use fmaps::{Backend, SpectrumParams};
 use serde_json::json;
-use std::sync::Arc;
 
 mod batch;
 mod demo;

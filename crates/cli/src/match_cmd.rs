@@ -309,7 +309,7 @@ pub(crate) fn params_of(args: &MatchArgs, sizes: (usize, usize)) -> Result<Match
     params.energy.orient_reversing = args.mirrored;
     params.adjoint = args.refiner.adjoint;
     params.area_normalize = !args.no_area_normalize;
-    let learned = learned_features(args)?;
+    let learned = crate::train_cmd::learned_features(&args.features, args.adapt, args.point_map)?;
     let (kind, mut options) = refinement(args, sizes, learned.is_some());
     if learned.is_some() && args.refine.is_none() && args.refiner.zoomout.is_none() {
         use fmaps::pipeline::LearnedFeatures;
@@ -365,44 +365,6 @@ pub(crate) fn params_of(args: &MatchArgs, sizes: (usize, usize)) -> Result<Match
         None => params.k_process_needed(),
     };
     Ok(params)
-}
-
-/// The learned features `--features`, `--adapt` and `--point-map` ask
-/// for (`None`: descriptors).
-fn learned_features(args: &MatchArgs) -> Result<Option<fmaps::pipeline::LearnedFeatures>, Failure> {
-    use fmaps::pipeline::LearnedFeatures;
-    let mut learned = match args.features.split_once('=') {
-        None if args.features == "descriptors" => None,
-        None if args.features == "learned" => Some(LearnedFeatures::shipped().map_err(runtime)?),
-        Some(("learned", file)) if !file.is_empty() => {
-            let model = fmaps::learn::model::Model::load(file).map_err(input)?;
-            Some(LearnedFeatures::new(Arc::new(model)))
-        }
-        _ => {
-            return Err(input(anyhow::anyhow!(
-                "--features '{}': expected descriptors, learned or learned=MODEL",
-                args.features
-            )));
-        }
-    };
-    match &mut learned {
-        Some(l) => {
-            if let Some(n) = args.adapt {
-                l.adaptation.steps = n;
-            }
-            if let Some(m) = args.point_map {
-                l.point_map = m;
-            }
-        }
-        None => {
-            if args.adapt.is_some() || args.point_map.is_some() {
-                return Err(input(anyhow::anyhow!(
-                    "--adapt and --point-map apply to learned features (--features learned)"
-                )));
-            }
-        }
-    }
-    Ok(learned)
 }
 
 /// Parses `--starts`: `none` (a single start) or sizes `K1,K2,..` (each at

@@ -569,3 +569,46 @@ fn save_curve(path: &Path, history: &[StepRecord]) -> anyhow::Result<()> {
     fmaps::mesh_io::atomic::write_atomically(path, |w| w.write_all(&png))?;
     Ok(())
 }
+
+/// The learned features `fmaps match --features`, `--adapt` and
+/// `--point-map` ask
+/// for (`None`: descriptors).
+pub(crate) fn learned_features(
+    features: &str,
+    adapt: Option<usize>,
+    point_map: Option<fmaps::pipeline::LearnedPointMap>,
+) -> Result<Option<fmaps::pipeline::LearnedFeatures>, Failure> {
+    use fmaps::pipeline::LearnedFeatures;
+    let mut learned = match features.split_once('=') {
+        None if features == "descriptors" => None,
+        None if features == "learned" => Some(LearnedFeatures::shipped().map_err(runtime)?),
+        Some(("learned", file)) if !file.is_empty() => {
+            let model = fmaps::learn::model::Model::load(file).map_err(input)?;
+            Some(LearnedFeatures::new(std::sync::Arc::new(model)))
+        }
+        _ => {
+            return Err(input(anyhow::anyhow!(
+                "--features '{}': expected descriptors, learned or learned=MODEL",
+                features
+            )));
+        }
+    };
+    match &mut learned {
+        Some(l) => {
+            if let Some(n) = adapt {
+                l.adaptation.steps = n;
+            }
+            if let Some(m) = point_map {
+                l.point_map = m;
+            }
+        }
+        None => {
+            if adapt.is_some() || point_map.is_some() {
+                return Err(input(anyhow::anyhow!(
+                    "--adapt and --point-map apply to learned features (--features learned)"
+                )));
+            }
+        }
+    }
+    Ok(learned)
+}
