@@ -25,40 +25,22 @@ def test_learned_features_give_the_cli_map(tmp_path):
     assert np.array_equal(r.map_ab, fmaps.read_indices(out))
 
 
+# A small network and a short run.
+SMALL = dict(
+    steps=4, width=8, blocks=1, outputs=24, inputs=8, eigenpairs=24, fmap_k=16, coupling_samples=200, threads=1
+)
+
+
 def test_a_trained_model_matches_and_adapts(tmp_path, pairs_small):
     a, b = pairs_small
     model = tmp_path / "small.npz"
-    losses = fmaps.train(
-        [a, b],
-        str(model),
-        steps=4,
-        width=8,
-        blocks=1,
-        outputs=24,
-        inputs=8,
-        eigenpairs=24,
-        fmap_k=16,
-        coupling_samples=200,
-        threads=1,
-    )
+    losses = fmaps.train([a, b], str(model), **SMALL)
     assert [d["step"] for d in losses] == [1, 2, 3, 4]
     assert all(np.isfinite(d["total"]) for d in losses)
     assert model.is_file()
     # A second call on the same files continues from the checkpoint: no
     # step is left to run.
-    again = fmaps.train(
-        [a, b],
-        str(model),
-        steps=4,
-        width=8,
-        blocks=1,
-        outputs=24,
-        inputs=8,
-        eigenpairs=24,
-        fmap_k=16,
-        coupling_samples=200,
-        threads=1,
-    )
+    again = fmaps.train([a, b], str(model), **SMALL)
     assert again == []
     plain = fmaps.match_shapes(a, b, features="learned", model=str(model), refine="none", k=16, threads=1)
     adapted = fmaps.match_shapes(

@@ -5,11 +5,13 @@
 //! through the regularised functional-map layer the network was trained
 //! with, then any refinement.
 
+use std::borrow::Cow;
 use std::sync::Arc;
 use std::time::Instant;
 
 use fmaps_learn::adapt::adapt;
 use fmaps_learn::fmap_layer::FmapLayer;
+use fmaps_learn::layers::Spectrum;
 use fmaps_learn::train::TrainShape;
 use fmaps_mesh_io::TriMesh;
 use fmaps_solve::convert::{BasisRows, pullback};
@@ -19,7 +21,7 @@ use super::error::MatchError;
 use super::features::{LearnedFeatures, LearnedPointMap, LearnedShape, learn_error, learned_shape};
 use super::params::MatchParams;
 use super::prepare::PreparedShape;
-use super::refining::{initial_map, orientation_of, refine_result, with_refiner};
+use super::refining::{initial_map, refine_and_orient};
 use super::result::{MatchResult, MatchTimes};
 use crate::solve;
 
@@ -76,7 +78,7 @@ pub(super) fn match_learned(
     );
     let (la, lb) = (la?, lb?);
     let (fa, fb) = if learned.adaptation.steps == 0 {
-        (la.features.clone(), lb.features.clone())
+        (Cow::Borrowed(&la.features), Cow::Borrowed(&lb.features))
     } else {
         let recipe = &learned.adaptation.recipe;
         let x =
@@ -85,10 +87,11 @@ pub(super) fn match_learned(
             TrainShape::from_operators("target", lb.operators.clone(), lb.input.clone(), recipe);
         let adapted = adapt(&learned.model, &x, &y, &learned.adaptation).map_err(learn_error)?;
         let m = &adapted.model;
-        rayon::join(
+        let (fa, fb) = rayon::join(
             || m.features_of(&la.operators, &la.input),
             || m.features_of(&lb.operators, &lb.input),
-        )
+        );
+        (Cow::Owned(fa), Cow::Owned(fb))
     };
     times.descriptors = t.elapsed().as_secs_f64();
 
@@ -121,11 +124,12 @@ pub(super) fn match_learned(
                 gamma: f.gamma,
             };
             let project = |s: &fmaps_eigensolve::SpectralBasis, f: &DMatrix<f64>| {
-                let mut mf = f.clone();
-                for (mut r, m) in mf.row_iter_mut().zip(s.mass.iter()) {
-                    r *= *m;
+                Spectrum {
+                    eigenvalues: &s.eigenvalues,
+                    eigenvectors: &s.eigenvectors,
+                    mass: &s.mass,
                 }
-                s.eigenvectors.transpose() * mf
+                .project(f)
             };
             // C_BA takes B's coefficients to A's.
             let c_ba = layer
@@ -155,12 +159,7 @@ pub(super) fn match_learned(
         energy: 0.0,
         times,
     };
-    if let Some(r) = with_refiner(&params.refinement, params.adjoint, a, b, |r| {
-        refine_result(&mut out, a, b, r)
-    }) {
-        r?;
-    }
-    out.orientation = orientation_of(&out.t_ab, a, b)?;
+    refine_and_orient(&mut out, a, b, params)?;
     Ok(out)
 }
 

@@ -57,6 +57,23 @@ pub fn refine_result(
     Ok(())
 }
 
+/// The last stages of one start: `params.refinement` applied to `out`
+/// ([`refine_result`]), then the orientation score of the final map.
+pub(super) fn refine_and_orient(
+    out: &mut MatchResult,
+    a: &PreparedShape,
+    b: &PreparedShape,
+    params: &MatchParams,
+) -> Result<(), MatchError> {
+    if let Some(r) = with_refiner(&params.refinement, params.adjoint, a, b, |r| {
+        refine_result(out, a, b, r)
+    }) {
+        r?;
+    }
+    out.orientation = orientation_of(&out.t_ab, a, b)?;
+    Ok(())
+}
+
 /// Calls `f` with the refiner `refine` describes for the pair (`a`, `b`)
 /// (`adjoint` forces the adjoint conversion); `None` for no refinement.
 pub(super) fn with_refiner<R>(

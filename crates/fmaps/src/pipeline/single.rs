@@ -9,7 +9,7 @@ use super::error::MatchError;
 use super::fit::{Described, fit_described};
 use super::params::MatchParams;
 use super::prepare::PreparedShape;
-use super::refining::{initial_map, orientation_of, refine_result, with_refiner};
+use super::refining::{initial_map, refine_and_orient};
 use super::result::{MatchResult, MatchTimes};
 
 use crate::solve;
@@ -68,11 +68,6 @@ pub(super) fn match_described_deferred(
         energy: energy_value,
         times,
     };
-    if let Some(r) = with_refiner(&params.refinement, params.adjoint, a, b, |r| {
-        refine_result(&mut out, a, b, r)
-    }) {
-        r?;
-    }
-    out.orientation = orientation_of(&out.t_ab, a, b)?;
+    refine_and_orient(&mut out, a, b, params)?;
     Ok((out, c_init))
 }
