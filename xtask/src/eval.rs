@@ -11,6 +11,9 @@ use anyhow::{Context, bail};
 use fmaps::eval::{Collection, EvalParams, evaluate};
 use fmaps::geodesic::{DijkstraSolver, DistanceSolver, ExactSolver};
 use fmaps::mesh_io::TriMesh;
+
+pub(crate) use crate::collections::collection_pairs;
+use crate::collections::farthest_points;
 use indicatif::{ProgressBar, ProgressStyle};
 use serde_json::json;
 
@@ -25,8 +28,9 @@ pub struct Args {
     /// `FAUST_r_ordered` (every ordered pair of tr_reg_080..099, the 20
     /// self-pairs included: the learned papers' 400 pairs); and the
     /// generated bodies (`cargo xtask generate`, built on demand):
-    /// `generated-iso` (one individual, two poses) and `generated-noniso`
-    /// (two individuals of different proportions).
+    /// `generated-iso` (one individual, two poses), `generated-noniso`
+    /// (two individuals of different proportions) and `generated-species`
+    /// (two species: proportions and postures of other kinds of body).
     #[arg(long = "collection")]
     collections: Vec<String>,
     /// Only the first N test pairs (default: all; after --offset/--stride).
@@ -62,6 +66,10 @@ pub struct Args {
     /// Threads for the fmaps pipeline (0 = all cores).
     #[arg(long, default_value_t = 0)]
     threads: usize,
+    /// Also write every map (`target/eval/maps/<collection>-<method>/<A>_<B>.map`,
+    /// 1-based as the dataset's), for `cargo xtask confidence`.
+    #[arg(long)]
+    save_maps: bool,
 }
 
 /// Where the maps of a method come from.
@@ -85,12 +93,21 @@ enum MapSource {
 }
 
 /// A map A -> B, its seconds when known, and method details (or null).
-type MethodMap = (Vec<usize>, Option<f64>, serde_json::Value);
+/// A method's map of a pair: the map, the seconds it took (when known),
+/// the pipeline's report (else null) and the pipeline's initial map.
+type MethodMap = (
+    Vec<usize>,
+    Option<f64>,
+    serde_json::Value,
+    Option<Vec<usize>>,
+);
 
 /// Prepared shapes (eigenbases) reused across pairs, like the peer does.
 struct PipelineCache {
     params: fmaps::MatchParams,
     shapes: HashMap<String, fmaps::pipeline::PreparedShape>,
+    /// Landmark pairs per pair, taken from the ground truth (`+landmarks=N`).
+    landmarks: usize,
 }
 
 impl MapSource {
@@ -107,8 +124,23 @@ impl MapSource {
             Some((head, tail)) => (format!("{head}{tail}"), true),
             None => (method, false),
         };
+        // `METHOD+landmarks=N`: N landmark pairs from the ground truth
+        // (farthest points of the truth's source points).
+        let (method, landmarks) = match method.split_once("+landmarks=") {
+            Some((head, n)) => (
+                head.to_string(),
+                n.parse::<usize>().context("+landmarks=N")?,
+            ),
+            None => (method, 0),
+        };
         let method = method.as_str();
         let mut source = MapSource::open_nn(c, method, peer_dir)?;
+        if landmarks > 0 {
+            match &mut source {
+                MapSource::Pipeline(cache) => cache.landmarks = landmarks,
+                _ => bail!("+landmarks applies to fmaps pipeline methods"),
+            }
+        }
         if sinkhorn {
             match &mut source {
                 MapSource::Pipeline(cache) | MapSource::Refined { cache, .. } => {
@@ -135,6 +167,7 @@ impl MapSource {
             return Ok(MapSource::Pipeline(Box::new(PipelineCache {
                 params,
                 shapes: HashMap::new(),
+                landmarks: 0,
             })));
         }
         if let Some((refine, starts, restart_below)) = pipeline_method(method)? {
@@ -149,6 +182,7 @@ impl MapSource {
             return Ok(MapSource::Pipeline(Box::new(PipelineCache {
                 params,
                 shapes: HashMap::new(),
+                landmarks: 0,
             })));
         }
         if let Some((refiner, published)) = method.split_once('@')
@@ -169,6 +203,7 @@ impl MapSource {
                 cache: Box::new(PipelineCache {
                     params,
                     shapes: HashMap::new(),
+                    landmarks: 0,
                 }),
             });
         }
@@ -199,14 +234,19 @@ impl MapSource {
     ) -> anyhow::Result<Option<MethodMap>> {
         use serde_json::Value::Null;
         match self {
-            MapSource::Published(m) => Ok(m.read(a, b)?.map(|t| (t, None, Null))),
+            MapSource::Published(m) => Ok(m.read(a, b)?.map(|t| (t, None, Null, None))),
             MapSource::PyFm { dir, seconds } => {
                 let path = dir.join(format!("{a}_{b}.map"));
                 if !path.exists() {
                     return Ok(None);
                 }
                 let t = fmaps::mesh_io::read_map(&path)?;
-                Ok(Some((t, seconds.get(&(a.into(), b.into())).copied(), Null)))
+                Ok(Some((
+                    t,
+                    seconds.get(&(a.into(), b.into())).copied(),
+                    Null,
+                    None,
+                )))
             }
             MapSource::Refined { published, cache } => {
                 let Some(init) = published.read(a, b)? else {
@@ -223,7 +263,7 @@ impl MapSource {
                 .with_context(|| format!("{} {a} -> {b}", c.name()))?;
                 let info =
                     json!({"orientation": r.orientation, "orientation_init": r.orientation_init});
-                Ok(Some((r.t_ab, Some(t.elapsed().as_secs_f64()), info)))
+                Ok(Some((r.t_ab, Some(t.elapsed().as_secs_f64()), info, None)))
             }
             MapSource::Pipeline(cache) => {
                 let t = Instant::now();
@@ -234,14 +274,29 @@ impl MapSource {
                         cache.shapes.insert(s.to_string(), p);
                     }
                 }
-                let r = fmaps::pipeline::match_prepared(
-                    &cache.shapes[a],
-                    &cache.shapes[b],
-                    &cache.params,
-                )
-                .with_context(|| format!("{} {a} -> {b}", c.name()))?;
-                let info = json!({"orientation": r.orientation, "starts": r.starts});
-                Ok(Some((r.t_ab, Some(t.elapsed().as_secs_f64()), info)))
+                let mut params = std::borrow::Cow::Borrowed(&cache.params);
+                if cache.landmarks > 0 {
+                    let (ma, mb) = (&meshes[a], &meshes[b]);
+                    let gt = c.ground_truth(a, b, ma.n_vertices(), mb.n_vertices())?;
+                    let picked = farthest_points(ma, gt.source(), cache.landmarks);
+                    params.to_mut().descriptors.landmarks = picked
+                        .iter()
+                        .map(|&i| (gt.source()[i], gt.target()[i]))
+                        .collect();
+                }
+                let r =
+                    fmaps::pipeline::match_prepared(&cache.shapes[a], &cache.shapes[b], &params)
+                        .with_context(|| format!("{} {a} -> {b}", c.name()))?;
+                let info = json!({"orientation": r.orientation, "starts": r.starts,
+                    "confidence": r.confidence.map(|c| json!({"metric_distortion": c.distortion,
+                        "long_range": c.long_range, "likely_wrong": c.likely_wrong})),
+                    "landmarks": params.descriptors.landmarks});
+                Ok(Some((
+                    r.t_ab,
+                    Some(t.elapsed().as_secs_f64()),
+                    info,
+                    Some(r.t_ab_init),
+                )))
             }
         }
     }
@@ -493,66 +548,6 @@ fn pyfm_seconds(
     Ok(out)
 }
 
-/// A collection and its pairs: a dataset collection with its
-/// `test_pairs.txt`, or one of the literature's splits of FAUST:
-/// `FAUST_r` (shapes tr_reg_080 .. tr_reg_099, all 190 unordered pairs,
-/// lower number first) and `FAUST_inter` (the test pairs of two different
-/// people: `tr_reg_0SP`, S the person).
-pub(crate) fn collection_pairs(
-    bcicp: &std::path::Path,
-    name: &str,
-) -> anyhow::Result<(Collection, Vec<(String, String)>)> {
-    match name {
-        "generated-iso" | "generated-noniso" | "generated" => {
-            let root = crate::generated::generated_root(false)?;
-            let c = Collection::open(&root, "generated")?;
-            let pairs = match name {
-                "generated-iso" => crate::generated::iso_pairs(),
-                "generated-noniso" => crate::generated::noniso_pairs(),
-                _ => c.test_pairs()?,
-            };
-            Ok((c, pairs))
-        }
-        "FAUST_r" => {
-            let c = Collection::open(bcicp, "FAUST")?;
-            let shapes: Vec<String> = (80..100).map(|i| format!("tr_reg_{i:03}")).collect();
-            let mut pairs = Vec::new();
-            for (i, a) in shapes.iter().enumerate() {
-                for b in &shapes[i + 1..] {
-                    pairs.push((a.clone(), b.clone()));
-                }
-            }
-            Ok((c, pairs))
-        }
-        "FAUST_r_ordered" => {
-            // The learned papers' protocol: every ordered pair of the test
-            // shapes, the 20 self-pairs included (400 pairs).
-            let c = Collection::open(bcicp, "FAUST")?;
-            let shapes: Vec<String> = (80..100).map(|i| format!("tr_reg_{i:03}")).collect();
-            let pairs = shapes
-                .iter()
-                .flat_map(|a| shapes.iter().map(move |b| (a.clone(), b.clone())))
-                .collect();
-            Ok((c, pairs))
-        }
-        "FAUST_inter" => {
-            let c = Collection::open(bcicp, "FAUST")?;
-            let person = |s: &str| s.strip_prefix("tr_reg_").and_then(|n| n.chars().nth(1));
-            let pairs = c
-                .test_pairs()?
-                .into_iter()
-                .filter(|(a, b)| person(a) != person(b))
-                .collect();
-            Ok((c, pairs))
-        }
-        _ => {
-            let c = Collection::open(bcicp, name)?;
-            let pairs = c.test_pairs()?;
-            Ok((c, pairs))
-        }
-    }
-}
-
 /// The file-name suffix of a run over a subset of the test pairs, so that
 /// a long collection can be run in chunks (`--offset 0 --pairs 50`,
 /// `--offset 50 --pairs 50`, ...) without one chunk overwriting another:
@@ -609,6 +604,12 @@ pub fn eval(args: &Args) -> anyhow::Result<()> {
             );
             bar.set_message(format!("{cname} {method}"));
             let mut per_pair = Vec::new();
+            let maps_dir = out_dir
+                .join("maps")
+                .join(format!("{cname}-{method}{}", subset_suffix(args)));
+            if args.save_maps {
+                std::fs::create_dir_all(&maps_dir)?;
+            }
             let mut missing = 0;
             let mut curve_sum = vec![0.0; params.n_thresholds];
             let mut geodesic_name = "";
@@ -620,11 +621,16 @@ pub fn eval(args: &Args) -> anyhow::Result<()> {
                         meshes.insert(s.clone(), c.read_mesh(s)?);
                     }
                 }
-                let Some((t_ab, secs, info)) = pool.install(|| maps.map(&c, &meshes, a, b))? else {
+                let Some((t_ab, secs, info, init)) =
+                    pool.install(|| maps.map(&c, &meshes, a, b))?
+                else {
                     missing += 1;
                     continue;
                 };
                 map_seconds.extend(secs);
+                if args.save_maps {
+                    fmaps::mesh_io::write_map(maps_dir.join(format!("{a}_{b}.map")), &t_ab)?;
+                }
                 let (ma, mb) = (&meshes[a], &meshes[b]);
                 if t_ab.len() != ma.n_vertices() {
                     bail!(
@@ -640,6 +646,18 @@ pub fn eval(args: &Args) -> anyhow::Result<()> {
                     other => bail!("unknown geodesic method '{other}' (exact, dijkstra)"),
                 };
                 let r = evaluate(mb, solver.as_ref(), &t_ab, &gt, None, &params)?;
+                // With --save-maps, the pipeline's initial map too: which
+                // stage went wrong.
+                let init_error = match init.filter(|_| args.save_maps) {
+                    Some(init) => {
+                        fmaps::mesh_io::write_map(
+                            maps_dir.join(format!("{a}_{b}.init.map")),
+                            &init,
+                        )?;
+                        Some(evaluate(mb, solver.as_ref(), &init, &gt, None, &params)?.mean_error)
+                    }
+                    None => None,
+                };
                 geodesic_name = r.geodesic;
                 curve_sum
                     .iter_mut()
@@ -648,7 +666,7 @@ pub fn eval(args: &Args) -> anyhow::Result<()> {
                 per_pair.push(json!({
                     "source": a, "target": b, "mean_error": r.mean_error, "sym_mean_error": r.sym_mean_error,
                     "auc": r.auc, "coverage": r.coverage, "seconds": r.seconds, "map_seconds": secs,
-                    "pipeline": info,
+                    "pipeline": info, "init_mean_error": init_error,
                 }));
             }
             bar.finish_and_clear();

@@ -19,17 +19,24 @@
 //! - `generated-iso`: the same individual in two poses (36 pairs).
 //! - `generated-noniso`: two different individuals (30 pairs, both orders
 //!   of each pair of individuals with different poses).
+//! - `generated-species`: two different species of
+//!   [`fmaps::shapes::body::species`] (upright, ape, quadruped on all fours,
+//!   bear with a large belly, kangaroo, gibbon; each in its posture and
+//!   striding): 30 pairs, both orders of each pair of species, one in
+//!   each variant; shapes `species_<s>_<v>`, remeshed at spacing
+//!   0.041-0.045.
 
 use std::path::{Path, PathBuf};
 
 use anyhow::Context;
+use fmaps::shapes::body::species::{SPECIES, species_shape};
 use fmaps::shapes::body::{Body, mirrored, nearest_vertices};
 
 use crate::util::root;
 
 /// Bump when the generator or the layout changes: the collection is
 /// rebuilt when its stamp differs.
-const VERSION: &str = "generated-bodies v2";
+const VERSION: &str = "generated-bodies v3";
 /// Individuals and poses.
 pub const INDIVIDUALS: usize = 6;
 pub const POSES: usize = 4;
@@ -45,6 +52,11 @@ pub struct Args {
 /// Name of a shape.
 pub fn shape_name(individual: usize, pose: usize) -> String {
     format!("body_{individual}_{pose}")
+}
+
+/// Name of a species shape.
+pub fn species_name(species: usize, variant: usize) -> String {
+    format!("species_{species}_{variant}")
 }
 
 /// The benchmark root (`bcicp`-like) holding the `generated` collection,
@@ -66,9 +78,9 @@ pub fn generated_root(force: bool) -> anyhow::Result<PathBuf> {
 pub fn generate(args: &Args) -> anyhow::Result<()> {
     let bcicp = generated_root(args.force)?;
     println!(
-        "{}: {} shapes, pairs in test_pairs.txt (iso then non-iso); evaluate with cargo xtask eval --collection generated-iso --collection generated-noniso",
+        "{}: {} shapes, pairs in test_pairs.txt (iso, non-iso, species); evaluate with cargo xtask eval --collection generated-iso --collection generated-noniso --collection generated-species",
         bcicp.join("generated").display(),
-        INDIVIDUALS * POSES
+        INDIVIDUALS * POSES + 2 * SPECIES.len()
     );
     Ok(())
 }
@@ -81,13 +93,20 @@ fn write_collection(dir: &Path) -> anyhow::Result<()> {
     let body = Body::template();
     let points = body.truth_points()?;
     let mirror: Vec<[f64; 3]> = points.iter().map(|&p| mirrored(p)).collect();
+    // (individual, pose) of the bodies, then (species, variant) offset by
+    // INDIVIDUALS.
     let jobs: Vec<(usize, usize)> = (0..INDIVIDUALS)
         .flat_map(|i| (0..POSES).map(move |p| (i, p)))
+        .chain((0..SPECIES.len()).flat_map(|s| (0..2).map(move |v| (INDIVIDUALS + s, v))))
         .collect();
     jobs.par_iter()
         .try_for_each(|&(i, p)| -> anyhow::Result<()> {
-            let shape = body.collection_shape(i, p)?;
-            let name = shape_name(i, p);
+            let (shape, name) = if i < INDIVIDUALS {
+                (body.collection_shape(i, p)?, shape_name(i, p))
+            } else {
+                let s = i - INDIVIDUALS;
+                (species_shape(&body, s, p, 0.043)?, species_name(s, p))
+            };
             fmaps::mesh_io::write_mesh(shapes_dir.join(format!("{name}.off")), &shape.mesh)?;
             fmaps::mesh_io::write_vts(
                 corres.join(format!("{name}.vts")),
@@ -100,7 +119,11 @@ fn write_collection(dir: &Path) -> anyhow::Result<()> {
             Ok(())
         })?;
     let mut lines = String::new();
-    for (a, b) in iso_pairs().into_iter().chain(noniso_pairs()) {
+    for (a, b) in iso_pairs()
+        .into_iter()
+        .chain(noniso_pairs())
+        .chain(species_pairs())
+    {
         lines.push_str(&format!("{a}\t{b}\n"));
     }
     std::fs::write(dir.join("test_pairs.txt"), lines)?;
@@ -134,6 +157,21 @@ pub fn noniso_pairs() -> Vec<(String, String)> {
                 shape_name(j, (i + j + 1) % POSES),
                 shape_name(i, (2 * i + j) % POSES),
             ));
+        }
+    }
+    out
+}
+
+/// Two species: for each pair s < t, s -> t and t -> s, one shape of each
+/// variant.
+pub fn species_pairs() -> Vec<(String, String)> {
+    let mut out = Vec::new();
+    let n = SPECIES.len();
+    for s in 0..n {
+        for t in s + 1..n {
+            let v = (s + t) % 2;
+            out.push((species_name(s, v), species_name(t, 1 - v)));
+            out.push((species_name(t, v), species_name(s, 1 - v)));
         }
     }
     out

@@ -22,6 +22,8 @@ mod bench;
 mod bench_learn;
 mod bench_match;
 mod bench_refine;
+mod collections;
+mod confidence;
 mod descriptor_check;
 mod eval;
 mod figures;
@@ -51,6 +53,8 @@ enum Command {
     Bench(bench::Args),
     /// The benchmark table over test pairs (published maps, fmaps-default (= smooth-shells, what `fmaps match` runs), fmaps-init, fmaps-icp, fmaps-zoomout[:START:FINAL:STEP], fmaps-smooth-shells[:KEY=VALUE,..] (fmaps-smooth-shells:non-isometric = `fmaps match --non-isometric`), REFINER@PUBLISHED such as zoomout@WKSini_symm, pyfm:<stage>).
     Eval(eval::Args),
+    /// Scores without ground truth (metric, area and conformal distortion) as detectors of globally wrong maps, on maps saved by `cargo xtask eval --save-maps`.
+    Confidence(confidence::Args),
     /// Write the generated benchmark collection (bodies of different builds and poses, exact ground truth) to target/generated/bcicp/generated.
     Generate(generated::Args),
     /// Multi-start selection rules (orientation, area/conformal distortion, ...) against the best start per pair.
@@ -100,6 +104,7 @@ fn main() -> anyhow::Result<()> {
         Command::Bench(a) => bench::bench(&a),
         Command::Eval(a) => eval::eval(&a),
         Command::Generate(a) => generated::generate(&a),
+        Command::Confidence(a) => confidence::confidence(&a),
         Command::Starts(a) => starts::starts(&a),
         Command::DescriptorCheck(a) => descriptor_check::descriptor_check(&a),
         Command::GeodesicCheck(a) => geodesic_check::geodesic_check(&a),

@@ -357,6 +357,10 @@ fn run_pair(shapes: &mut Shapes<'_>, m: &MatchArgs, p: &Pair, stem: &str) -> Res
             "pair": t.elapsed().as_secs_f64()},
         "refine": r.refine.as_ref().map(|rep| rep.method.clone()),
         "orientation": r.orientation,
+        "confidence": r.confidence.map(|c| json!({
+            "metric_distortion": c.distortion, "long_range": c.long_range,
+            "likely_wrong": c.likely_wrong,
+        })),
         "quality": quality,
         "errors": errors,
     });

@@ -453,6 +453,9 @@ pub(crate) fn match_cmd(args: &MatchArgs) -> Result<(), Failure> {
         match_failure(e, file)
     })?;
     drop(spinner);
+    if let Some(advice) = r.confidence.as_ref().and_then(|c| c.advice()) {
+        eprintln!("warning: this map is likely wrong: {advice}");
+    }
     crate::outputs::write_map_outputs(
         args.out.as_deref(),
         args.save_fmap.as_deref(),
@@ -500,6 +503,11 @@ pub(crate) fn match_cmd(args: &MatchArgs) -> Result<(), Failure> {
             })),
             "refine_samples": {"per_shape": samples, "automatic": auto_samples},
             "orientation": r.orientation,
+            "confidence": r.confidence.map(|c| json!({
+                "metric_distortion": c.distortion, "long_range": c.long_range,
+                "likely_wrong": c.likely_wrong, "warn_above": fmaps::pipeline::Confidence::WARN_ABOVE,
+                "advice": c.advice(), "seconds": c.seconds,
+            })),
             "quality": quality,
             "starts": r.starts,
             "changed_by_refinement": r.t_ab.iter().zip(&r.t_ab_init).filter(|(x, y)| x != y).count(),
@@ -586,6 +594,14 @@ pub(crate) fn match_cmd(args: &MatchArgs) -> Result<(), Failure> {
         quality.area_distortion,
         quality.conformal_distortion
     );
+    if let Some(c) = r.confidence {
+        outln!(
+            o,
+            "confidence: metric distortion {:.3} (above {}: likely globally wrong)",
+            c.distortion,
+            fmaps::pipeline::Confidence::WARN_ABOVE
+        );
+    }
     if let Some(k) = params.starts_stop() {
         let kf = r.c_ba.ncols();
         outln!(

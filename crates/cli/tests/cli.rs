@@ -296,9 +296,14 @@ fn match_writes_a_one_based_map_and_reports_stages() {
     assert_eq!(v["refine"]["method"], "zoomout 8:20:4");
     assert_eq!(v["refine"]["iterations"], 3);
     assert_eq!(v["refine"]["final_k"], 20);
-    // The map of a shape to itself keeps its orientation.
+    // The map of a shape to itself keeps its orientation, and distances:
+    // it is trusted, with no advice.
     assert!(v["orientation"].as_f64().unwrap() > 0.9, "{v}");
     assert_eq!(v["starts"].as_array().unwrap().len(), 0);
+    let c = &v["confidence"];
+    assert!(c["metric_distortion"].as_f64().unwrap() < 0.1, "{v}");
+    assert_eq!(c["likely_wrong"], false);
+    assert!(c["advice"].is_null(), "{v}");
     // ZoomOut runs multi-start by default (sizes 8 and 20 besides k, those
     // within the computed basis: here both).
     let v = json_of(

@@ -40,6 +40,7 @@
 #![forbid(unsafe_code)]
 
 mod dataset;
+pub mod distortion;
 #[cfg(feature = "published-maps")]
 mod published;
 pub mod quality;
@@ -52,6 +53,7 @@ use fmaps_mesh_io::TriMesh;
 use rayon::prelude::*;
 
 pub use dataset::Collection;
+pub use distortion::{MetricDistortion, metric_distortion};
 #[cfg(feature = "published-maps")]
 pub use published::PublishedMaps;
 pub use quality::{MapQuality, map_quality};
@@ -86,6 +88,9 @@ pub enum Error {
         /// The size.
         size: usize,
     },
+    /// A parameter is out of its range.
+    #[error("{0}")]
+    Parameter(String),
     /// The ground truth has no point: there is nothing to measure.
     #[error("the ground truth is empty: no point to measure the map at")]
     EmptyGroundTruth,
@@ -146,6 +151,16 @@ impl GroundTruth {
             target,
             target_sym,
         })
+    }
+
+    /// The points on A (0-based vertices).
+    pub fn source(&self) -> &[usize] {
+        &self.source
+    }
+
+    /// The points on B, line-aligned with [`GroundTruth::source`].
+    pub fn target(&self) -> &[usize] {
+        &self.target
     }
 
     /// Number of ground-truth points.

@@ -154,7 +154,7 @@ pub fn map_quality(
     })
 }
 
-fn check_map(what: &str, t: &[usize], n_from: usize, n_to: usize) -> Result<()> {
+pub(crate) fn check_map(what: &str, t: &[usize], n_from: usize, n_to: usize) -> Result<()> {
     if t.len() != n_from {
         return Err(Error::SizeMismatch {
             what: format!("{what} (one target per vertex)"),

@@ -39,6 +39,7 @@ use std::time::Instant;
 
 use fmaps_mesh_io::TriMesh;
 
+mod confidence;
 mod error;
 mod features;
 mod fit;
@@ -52,6 +53,7 @@ mod result;
 mod single;
 mod starts;
 
+pub use confidence::Confidence;
 pub use error::MatchError;
 pub use features::{LearnedFeatures, LearnedPointMap, LearnedShape};
 use fit::Described;
@@ -114,8 +116,22 @@ pub fn match_shapes_with_progress(
     Ok(out)
 }
 
-/// The pipeline on two prepared shapes (source `a`, target `b`).
+/// The pipeline on two prepared shapes (source `a`, target `b`), the
+/// final map's [`Confidence`] included.
 pub fn match_prepared(
+    a: &PreparedShape,
+    b: &PreparedShape,
+    params: &MatchParams,
+) -> Result<MatchResult, MatchError> {
+    let mut out = match_map(a, b, params)?;
+    let confidence = Confidence::of_map(&out.t_ab, a, b)?;
+    out.times.total += confidence.seconds;
+    out.confidence = Some(confidence);
+    Ok(out)
+}
+
+/// [`match_prepared`] without the confidence.
+fn match_map(
     a: &PreparedShape,
     b: &PreparedShape,
     params: &MatchParams,

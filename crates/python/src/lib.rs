@@ -303,6 +303,12 @@ struct MatchResult {
     c_ba: Py<PyArray2<f64>>,
     /// Orientation score of `map_ab` (near 1 preserved, near −1 mirrored).
     orientation: f64,
+    /// How far `map_ab` can be trusted without ground truth:
+    /// `metric_distortion` (distortion of distances between samples spread
+    /// over A; 0 kept), `long_range`, `likely_wrong` (above
+    /// `warn_above`: the map is likely globally misaligned), `advice`
+    /// (what to try then, else None).
+    confidence: Py<PyDict>,
     /// Seconds per stage: spectra, descriptors, operators, solve,
     /// point_map, refine, total.
     times: Py<PyDict>,
@@ -446,11 +452,20 @@ fn result(
     }
     let q = quality_dict(py, &quality)?;
     let (refiner, seconds_per_iteration) = refiner_summary(r.refine.as_ref());
+    let confidence = PyDict::new(py);
+    if let Some(c) = r.confidence {
+        confidence.set_item("metric_distortion", c.distortion)?;
+        confidence.set_item("long_range", c.long_range)?;
+        confidence.set_item("likely_wrong", c.likely_wrong)?;
+        confidence.set_item("warn_above", fmaps::pipeline::Confidence::WARN_ABOVE)?;
+        confidence.set_item("advice", c.advice())?;
+    }
     Ok(MatchResult {
         map_ab: indices(py, &r.t_ab),
         map_ab_init: indices(py, &r.t_ab_init),
         c_ba: fortran(r.c_ba).into_pyarray(py).unbind(),
         orientation: r.orientation,
+        confidence: confidence.unbind(),
         times: times.unbind(),
         quality: q.unbind(),
         refiner,

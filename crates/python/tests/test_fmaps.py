@@ -94,7 +94,11 @@ def test_a_faust_pair_gives_the_cli_map(tmp_path):
     r = fmaps.match_shapes(fmaps.Mesh.load(a), fmaps.Mesh.load(b), threads=2)
     # The .map file is 1-based; read_indices makes it 0-based.
     assert np.array_equal(r.map_ab, fmaps.read_indices(out))
-    assert r.orientation == json.loads(info.stdout)["orientation"]
+    cli_json = json.loads(info.stdout)
+    assert r.orientation == cli_json["orientation"]
+    # The same confidence as the CLI's, and a trusted map.
+    assert r.confidence["metric_distortion"] == cli_json["confidence"]["metric_distortion"]
+    assert not r.confidence["likely_wrong"] and r.confidence["advice"] is None
     gt_a = fmaps.read_indices(FAUST / "corres" / "tr_reg_080.vts")
     gt_b = fmaps.read_indices(FAUST / "corres" / "tr_reg_081.vts")
     e = fmaps.evaluate(fmaps.Mesh.load(a), fmaps.Mesh.load(b), r.map_ab, gt_a, gt_b, geodesic="dijkstra")

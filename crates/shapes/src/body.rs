@@ -46,6 +46,7 @@ use fmaps_mesh_io::vec3::{dot, normalized, rotate, sub};
 use fmaps_simd::SplitMix;
 
 use crate::Result;
+use geometry::{Affine, capsule_distance, mat_mul, rotation_matrix, smooth_min};
 
 /// Number of bones of the template skeleton.
 pub const N_BONES: usize = 18;
@@ -123,6 +124,8 @@ pub struct Body {
     blend: f64,
     /// Width of the skinning weights' fall-off.
     skin: f64,
+    /// Index in `capsules` of the belly (scaled by [`Build::belly`]).
+    belly: usize,
 }
 
 /// Proportions of a body: each factor multiplies the template's (1 = the
@@ -149,6 +152,9 @@ pub struct Build {
     pub tail_length: f64,
     /// Thickness of the tail.
     pub tail_girth: f64,
+    /// Size of the belly: its bulge away from the belly's axis, forward and
+    /// sideways, is scaled by this factor (1 = the template's).
+    pub belly: f64,
 }
 
 impl Build {
@@ -165,12 +171,14 @@ impl Build {
             leg_girth: 1.0,
             tail_length: 1.0,
             tail_girth: 1.0,
+            belly: 1.0,
         }
     }
 
     /// Pseudo-random proportions (log-uniform): limb and tail lengths in
     /// 0.6-1.6, girths and head size in 0.7-1.4, torso length in
-    /// 0.75-1.3, neck length in 0.6-1.5.
+    /// 0.75-1.3, neck length in 0.6-1.5; the template's belly (see
+    /// [`species`] for bellies and postures of other kinds of body).
     pub fn random(seed: u64) -> Build {
         let mut rng = SplitMix(seed ^ 0xB0D1);
         let mut f = |lo: f64, hi: f64| (lo.ln() + rng.unit() * (hi.ln() - lo.ln())).exp();
@@ -185,6 +193,7 @@ impl Build {
             leg_girth: f(0.7, 1.4),
             tail_length: f(0.6, 1.6),
             tail_girth: f(0.7, 1.4),
+            belly: 1.0,
         }
     }
 
@@ -405,6 +414,7 @@ impl Body {
             ra: 0.075,
             rb: 0.075,
         });
+        let belly = capsules.len();
         capsules.push(Capsule {
             bone: bones::CHEST,
             a: [0.0, 0.36, 0.04],
@@ -431,6 +441,7 @@ impl Body {
             capsules,
             blend: 0.035,
             skin: 0.04,
+            belly,
         }
     }
 
@@ -467,8 +478,9 @@ impl Body {
         let v = rest
             .vertices()
             .iter()
-            .map(|&x| {
-                let w = self.weights(x);
+            .map(|&rest_x| {
+                let w = self.weights(rest_x);
+                let x = self.bulge(rest_x, build.belly);
                 let mut y = [0.0; 3];
                 for (b, wb) in w.iter().enumerate() {
                     if *wb > 0.0 {
@@ -576,6 +588,32 @@ impl Body {
         }
         let s: f64 = w.iter().sum();
         w.map(|wb| wb / s)
+    }
+
+    /// A rest point moved by a belly of size `belly`: its offset across the
+    /// belly capsule's axis scaled by `1 + (belly - 1) w`, where `w` is 1
+    /// on the capsule's surface in front of its axis and falls off
+    /// smoothly to 0 with the distance beyond that surface (over 0.3),
+    /// beyond the capsule's ends (over 0.15) and towards the back. Points
+    /// move across the axis only, and their offset stays monotonic in the
+    /// distance from it: no fold for bellies up to twice the template's.
+    fn bulge(&self, x: [f64; 3], belly: f64) -> [f64; 3] {
+        if belly == 1.0 {
+            return x;
+        }
+        let c = &self.capsules[self.belly];
+        let ab = sub(c.b, c.a);
+        let length = dot(ab, ab).sqrt();
+        let t = dot(sub(x, c.a), ab) / (length * length);
+        let q = [c.a[0] + t * ab[0], c.a[1] + t * ab[1], c.a[2] + t * ab[2]];
+        let d = sub(x, q);
+        let r = dot(d, d).sqrt();
+        let radius = c.ra + t.clamp(0.0, 1.0) * (c.rb - c.ra);
+        let outside = (t.max(1.0) - 1.0 - t.min(0.0)) * length;
+        let fall = smoothstep(1.0 - (r - radius).max(0.0) / 0.3) * smoothstep(1.0 - outside / 0.15);
+        let front = smoothstep(0.5 + d[2] / radius);
+        let s = 1.0 + (belly - 1.0) * fall * front;
+        [q[0] + s * d[0], q[1] + s * d[1], q[2] + s * d[2]]
     }
 
     /// Each bone's affine map `x -> J' + R S (x - J)` for a build and a
@@ -699,77 +737,8 @@ pub fn mirrored(p: [f64; 3]) -> [f64; 3] {
     [-p[0], p[1], p[2]]
 }
 
-#[derive(Debug, Clone, Copy)]
-struct Affine {
-    rot: [[f64; 3]; 3],
-    lin: [[f64; 3]; 3],
-    origin: [f64; 3],
-    joint: [f64; 3],
-}
-
-impl Affine {
-    fn apply(&self, x: [f64; 3]) -> [f64; 3] {
-        let y = mat_vec(&self.lin, sub(x, self.origin));
-        [
-            y[0] + self.joint[0],
-            y[1] + self.joint[1],
-            y[2] + self.joint[2],
-        ]
-    }
-}
-
-/// Distance to a tapered capsule (radius interpolated along the segment).
-fn capsule_distance(c: &Capsule, p: [f64; 3]) -> f64 {
-    let ab = sub(c.b, c.a);
-    let t = (dot(sub(p, c.a), ab) / dot(ab, ab)).clamp(0.0, 1.0);
-    let q = [c.a[0] + t * ab[0], c.a[1] + t * ab[1], c.a[2] + t * ab[2]];
-    let d = sub(p, q);
-    dot(d, d).sqrt() - (c.ra + t * (c.rb - c.ra))
-}
-
-/// Polynomial smooth minimum of width `k`.
-fn smooth_min(a: f64, b: f64, k: f64) -> f64 {
-    if !a.is_finite() {
-        return b;
-    }
-    let h = (k - (a - b).abs()).max(0.0) / k;
-    a.min(b) - h * h * k / 4.0
-}
-
-fn rotation_matrix(v: [f64; 3]) -> [[f64; 3]; 3] {
-    let angle = dot(v, v).sqrt();
-    let mut m = [[0.0; 3]; 3];
-    if angle == 0.0 {
-        for (i, row) in m.iter_mut().enumerate() {
-            row[i] = 1.0;
-        }
-        return m;
-    }
-    let axis = [v[0] / angle, v[1] / angle, v[2] / angle];
-    for c in 0..3 {
-        let mut e = [0.0; 3];
-        e[c] = 1.0;
-        let r = rotate(e, axis, angle);
-        for (row, x) in m.iter_mut().zip(r) {
-            row[c] = x;
-        }
-    }
-    m
-}
-
-fn mat_mul(a: &[[f64; 3]; 3], b: &[[f64; 3]; 3]) -> [[f64; 3]; 3] {
-    let mut m = [[0.0; 3]; 3];
-    for r in 0..3 {
-        for c in 0..3 {
-            m[r][c] = (0..3).map(|k| a[r][k] * b[k][c]).sum();
-        }
-    }
-    m
-}
-
-fn mat_vec(a: &[[f64; 3]; 3], x: [f64; 3]) -> [f64; 3] {
-    [dot(a[0], x), dot(a[1], x), dot(a[2], x)]
-}
+mod geometry;
+pub mod species;
 
 #[cfg(test)]
 mod tests;

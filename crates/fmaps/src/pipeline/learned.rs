@@ -158,6 +158,7 @@ pub(super) fn match_learned(
         energy_terms: solve::PerTerm::default(),
         energy: 0.0,
         times,
+        confidence: None,
     };
     refine_and_orient(&mut out, a, b, params)?;
     Ok(out)

@@ -53,6 +53,10 @@ pub struct MatchResult {
     pub energy: f64,
     /// Timings.
     pub times: MatchTimes,
+    /// How far the final map can be trusted (computed by
+    /// [`match_prepared`](super::match_prepared) and the functions built on
+    /// it; `None` from a bare refinement).
+    pub confidence: Option<super::Confidence>,
 }
 
 /// One start of a multi-start run.

@@ -67,6 +67,7 @@ pub(super) fn match_described_deferred(
         energy_terms,
         energy: energy_value,
         times,
+        confidence: None,
     };
     refine_and_orient(&mut out, a, b, params)?;
     Ok((out, c_init))

@@ -66,6 +66,8 @@ class MatchResult:
     """Coefficients on B to coefficients on A."""
     orientation: float
     """Orientation score of `map_ab` (near 1 preserved, near -1 mirrored)."""
+    confidence: dict
+    """Without ground truth: metric_distortion, long_range, likely_wrong (above warn_above: likely globally misaligned), warn_above, advice."""
     times: dict
     """Seconds per stage (spectra, descriptors, operators, solve, point_map, refine, total)."""
     quality: dict

@@ -176,3 +176,72 @@ fn nearest_vertices_equal_a_plain_scan_with_ties() {
     assert!(got.iter().all(|&j| j < vertices.len() / 2));
     assert_eq!(nearest_vertices(&points[..2], &[]), vec![0, 0]);
 }
+
+#[test]
+fn a_larger_belly_grows_the_body_without_folding_it() {
+    let body = Body::template();
+    let rest = body.rest_mesh(0.05, [0.3; 3]).unwrap();
+    let mut build = Build::average();
+    build.belly = 1.8;
+    let big = body.deform(&rest, &build, &BodyPose::rest()).unwrap();
+    let (va, vb) = (rest.vertices(), big.vertices());
+    let normal = |v: &[[f64; 3]], t: &[usize; 3]| {
+        fmaps_mesh_io::vec3::cross(sub(v[t[1]], v[t[0]]), sub(v[t[2]], v[t[0]]))
+    };
+    // No face turns over: each keeps its orientation.
+    for t in rest.faces() {
+        assert!(
+            dot(normal(va, t), normal(vb, t)) > 0.0,
+            "face {t:?} folds: {:?} -> {:?}",
+            t.map(|i| va[i]),
+            t.map(|i| vb[i])
+        );
+    }
+    // The belly grows (more area), the back and the limbs do not move.
+    assert!(
+        big.area() > 1.03 * rest.area(),
+        "{} {}",
+        big.area(),
+        rest.area()
+    );
+    for (p, q) in va.iter().zip(vb) {
+        if p[1] < -0.2 || p[1] > 0.8 || p[2] < -0.15 {
+            assert!(dot(sub(*p, *q), sub(*p, *q)).sqrt() < 1e-3, "{p:?} moved");
+        }
+    }
+}
+
+#[test]
+fn every_species_is_a_clean_closed_surface_far_from_the_others() {
+    use species::{SPECIES, species_shape};
+    let body = Body::template();
+    let shapes: Vec<GeneratedShape> = (0..SPECIES.len())
+        .map(|s| species_shape(&body, s, 1, 0.07).unwrap())
+        .collect();
+    for (s, shape) in SPECIES.iter().zip(&shapes) {
+        let r = shape.mesh.validate();
+        assert!(r.is_closed_manifold() && r.is_clean(), "{}: {r:?}", s.name);
+        assert_eq!(r.genus, Some(0), "{}", s.name);
+        assert_eq!(r.connected_components, 1, "{}", s.name);
+    }
+    // Across species, edges change far more than between two poses of one
+    // body (see poses_are_near_isometric_and_builds_are_not).
+    let rest = body.rest_mesh(0.07, [0.5; 3]).unwrap();
+    let posed: Vec<TriMesh> = SPECIES
+        .iter()
+        .map(|s| body.deform(&rest, &(s.build)(), &(s.posture)()).unwrap())
+        .collect();
+    for i in 0..posed.len() {
+        for j in i + 1..posed.len() {
+            let change = mean_relative_edge_change(&posed[i], &posed[j]);
+            assert!(
+                change > 0.05,
+                "{} {}: {change}",
+                SPECIES[i].name,
+                SPECIES[j].name
+            );
+        }
+    }
+    assert!(species_shape(&body, SPECIES.len(), 0, 0.07).is_err());
+    assert!(species_shape(&body, 0, 2, 0.07).is_err());
+}
