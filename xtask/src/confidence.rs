@@ -6,7 +6,8 @@
 //! its true error from the evaluation's report. Printed: per method the
 //! bad maps (true error above `--bad` ×100), the area under the ROC curve
 //! of each score as a detector of them, the precision and recall of the
-//! warning threshold; across methods, the error of keeping per pair the
+//! warning (metric or area distortion above its threshold, as `fmaps
+//! match` warns); across methods, the error of keeping per pair the
 //! map of lowest metric distortion, beside the best map per pair (the
 //! oracle). Written to `target/eval/confidence-<collection>.json`.
 
@@ -31,9 +32,12 @@ pub struct Args {
     #[arg(long, default_value_t = 30.0)]
     bad: f64,
     /// The warning threshold of metric distortion whose precision and
-    /// recall are reported.
+    /// recall are reported (with --warn-area-above: either above warns).
     #[arg(long, default_value_t = fmaps::pipeline::Confidence::WARN_ABOVE)]
     warn_above: f64,
+    /// The warning threshold of area distortion.
+    #[arg(long, default_value_t = fmaps::pipeline::Confidence::WARN_AREA_ABOVE)]
+    warn_area_above: f64,
     /// Samples of the metric distortion.
     #[arg(long, default_value_t = fmaps::pipeline::Confidence::SAMPLES)]
     samples: usize,
@@ -83,6 +87,11 @@ fn auc(items: &[(f64, bool)]) -> Option<f64> {
         }
     }
     Some(wins / (bad.len() * good.len()) as f64)
+}
+
+/// A map is bad when its error (x100) is above `bad`.
+fn is_bad_error(error: f64, bad: f64) -> bool {
+    error > bad
 }
 
 /// `cargo xtask confidence`.
@@ -141,11 +150,13 @@ pub fn confidence(args: &Args) -> anyhow::Result<()> {
                     })
                 })
                 .collect::<anyhow::Result<_>>()?;
-            let is_bad = |s: &Scored| s.error > args.bad;
+            let is_bad = |s: &Scored| is_bad_error(s.error, args.bad);
             let roc = |f: &dyn Fn(&Scored) -> f64| {
                 auc(&scored.iter().map(|s| (f(s), is_bad(s))).collect::<Vec<_>>())
             };
-            let warned = scored.iter().filter(|s| s.distortion > args.warn_above);
+            let warned = scored
+                .iter()
+                .filter(|s| s.distortion > args.warn_above || s.area > args.warn_area_above);
             let (n_warned, n_hit) =
                 warned.fold((0, 0), |(w, h), s| (w + 1, h + usize::from(is_bad(s))));
             let n_bad = scored.iter().filter(|s| is_bad(s)).count();
@@ -217,6 +228,59 @@ pub fn confidence(args: &Args) -> anyhow::Result<()> {
             let n = by_method[0].len();
             if by_method.iter().any(|m| m.len() != n) {
                 bail!("{cname}: the methods were evaluated on different pairs");
+            }
+            // Agreement of the first two methods: the mean distance on B
+            // between their images of samples spread over A (Dijkstra, at
+            // unit area). Maps that disagree cannot both be right.
+            let dirs: Vec<PathBuf> = args.methods[..2]
+                .iter()
+                .map(|m| out_dir.join("maps").join(format!("{cname}-{m}")))
+                .collect();
+            let disagreement: Vec<f64> = (0..n)
+                .into_par_iter()
+                .map(|i| -> anyhow::Result<f64> {
+                    let (a, b) = (&by_method[0][i].source, &by_method[0][i].target);
+                    let read =
+                        |d: &PathBuf| fmaps::mesh_io::read_map(d.join(format!("{a}_{b}.map")));
+                    let (t0, t1) = (read(&dirs[0])?, read(&dirs[1])?);
+                    let (ma, mb) = (c.read_mesh(a)?, c.read_mesh(b)?);
+                    let solver = fmaps::geodesic::DijkstraSolver::new(&mb);
+                    let samples =
+                        fmaps::refine::farthest_point_sampling(ma.vertices(), args.samples, 0);
+                    let mut sum = 0.0;
+                    for &v in &samples {
+                        use fmaps::geodesic::DistanceSolver;
+                        let d = solver.distances_to(&[t0[v]], &[t1[v]])?;
+                        sum += d[0];
+                    }
+                    Ok(sum / samples.len().max(1) as f64 / mb.area().sqrt())
+                })
+                .collect::<anyhow::Result<_>>()?;
+            let first_bad: Vec<(f64, bool)> = (0..n)
+                .map(|i| {
+                    (
+                        disagreement[i],
+                        is_bad_error(by_method[0][i].error, args.bad),
+                    )
+                })
+                .collect();
+            let fmt = |x: Option<f64>| x.map_or("-".to_string(), |v| format!("{v:.3}"));
+            println!(
+                "disagreement of {} and {}: AUC {} as a detector of the first's bad maps",
+                args.methods[0],
+                args.methods[1],
+                fmt(auc(&first_bad))
+            );
+            if args.per_pair {
+                for (i, d) in disagreement.iter().enumerate() {
+                    println!(
+                        "  {:<16} {:<16} errors {:7.2} {:7.2} disagreement {d:.3}",
+                        by_method[0][i].source,
+                        by_method[0][i].target,
+                        by_method[0][i].error,
+                        by_method[1][i].error
+                    );
+                }
             }
             let oracle = (0..n)
                 .map(|i| {

@@ -31,6 +31,7 @@ mod fit_check;
 mod generated;
 mod geodesic_check;
 mod learn;
+mod methods;
 mod pictures;
 mod profile;
 mod publish_check;

@@ -359,7 +359,7 @@ fn run_pair(shapes: &mut Shapes<'_>, m: &MatchArgs, p: &Pair, stem: &str) -> Res
         "orientation": r.orientation,
         "confidence": r.confidence.map(|c| json!({
             "metric_distortion": c.distortion, "long_range": c.long_range,
-            "likely_wrong": c.likely_wrong,
+            "area_distortion": c.area_distortion, "likely_wrong": c.likely_wrong,
         })),
         "quality": quality,
         "errors": errors,

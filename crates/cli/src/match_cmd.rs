@@ -89,6 +89,12 @@ pub(crate) struct MatchArgs {
     /// it.
     #[arg(long)]
     non_isometric: bool,
+    /// Smooth Shells runs both settings, the default's and
+    /// --non-isometric's, and keeps the map that distorts area least
+    /// (twice the time; better than either alone between different
+    /// builds or species: docs/benchmarks.md, section Confidence).
+    #[arg(long)]
+    second_opinion: bool,
     /// Where the per-vertex features come from: `descriptors` (spectral
     /// descriptors and the functional-map energy), `learned` (the
     /// DiffusionNet model shipped with fmaps, trained without labels on
@@ -278,9 +284,10 @@ fn refinement(
         }
         (None, None) => RefinerKind::default_for(n_a.min(n_b)),
     };
-    let options = args
+    let mut options = args
         .refiner
         .options(args.k, args.mirrored, args.non_isometric, (n_a, n_b));
+    options.second_opinion = args.second_opinion;
     (kind, options)
 }
 
@@ -453,8 +460,13 @@ pub(crate) fn match_cmd(args: &MatchArgs) -> Result<(), Failure> {
         match_failure(e, file)
     })?;
     drop(spinner);
-    if let Some(advice) = r.confidence.as_ref().and_then(|c| c.advice()) {
-        eprintln!("warning: this map is likely wrong: {advice}");
+    if let Some(c) = r.confidence.as_ref().filter(|c| c.likely_wrong) {
+        eprintln!(
+            "warning: this map is likely wrong (metric distortion {:.3}, area distortion {:.3}): {}; try --second-opinion, or --landmarks FILE",
+            c.distortion,
+            c.area_distortion,
+            c.advice().unwrap_or_default()
+        );
     }
     crate::outputs::write_map_outputs(
         args.out.as_deref(),
@@ -505,7 +517,9 @@ pub(crate) fn match_cmd(args: &MatchArgs) -> Result<(), Failure> {
             "orientation": r.orientation,
             "confidence": r.confidence.map(|c| json!({
                 "metric_distortion": c.distortion, "long_range": c.long_range,
-                "likely_wrong": c.likely_wrong, "warn_above": fmaps::pipeline::Confidence::WARN_ABOVE,
+                "area_distortion": c.area_distortion, "likely_wrong": c.likely_wrong,
+                "warn_above": {"metric_distortion": fmaps::pipeline::Confidence::WARN_ABOVE,
+                    "area_distortion": fmaps::pipeline::Confidence::WARN_AREA_ABOVE},
                 "advice": c.advice(), "seconds": c.seconds,
             })),
             "quality": quality,
@@ -597,9 +611,11 @@ pub(crate) fn match_cmd(args: &MatchArgs) -> Result<(), Failure> {
     if let Some(c) = r.confidence {
         outln!(
             o,
-            "confidence: metric distortion {:.3} (above {}: likely globally wrong)",
+            "confidence: metric distortion {:.3}, area distortion {:.3} (above {} or {}: likely globally wrong)",
             c.distortion,
-            fmaps::pipeline::Confidence::WARN_ABOVE
+            c.area_distortion,
+            fmaps::pipeline::Confidence::WARN_ABOVE,
+            fmaps::pipeline::Confidence::WARN_AREA_ABOVE
         );
     }
     if let Some(k) = params.starts_stop() {

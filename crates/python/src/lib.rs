@@ -258,7 +258,7 @@ fn params_for(
     k: usize,
     k_process: usize,
     w_orient: Option<f64>,
-    (mirrored, non_isometric): (bool, bool),
+    (mirrored, non_isometric, second_opinion): (bool, bool, bool),
     area_normalize: bool,
 ) -> PyResult<MatchParams> {
     let mut p = MatchParams::unrefined();
@@ -275,6 +275,7 @@ fn params_for(
     options.schedule = schedule;
     options.mirrored = mirrored;
     options.non_isometric = non_isometric;
+    options.second_opinion = second_opinion;
     options.samples = RefineSampling::default().samples_for(n_a, n_b);
     p.set_refinement(kind, &options)
         .map_err(|e| err(format!("refine = {refine:?}: {e}")))?;
@@ -305,9 +306,9 @@ struct MatchResult {
     orientation: f64,
     /// How far `map_ab` can be trusted without ground truth:
     /// `metric_distortion` (distortion of distances between samples spread
-    /// over A; 0 kept), `long_range`, `likely_wrong` (above
-    /// `warn_above`: the map is likely globally misaligned), `advice`
-    /// (what to try then, else None).
+    /// over A; 0 kept), `long_range`, `area_distortion`, `likely_wrong`
+    /// (either above its `warn_above`: the map is likely globally
+    /// misaligned), `advice` (what to try then, else None).
     confidence: Py<PyDict>,
     /// Seconds per stage: spectra, descriptors, operators, solve,
     /// point_map, refine, total.
@@ -344,7 +345,7 @@ fn indices(py: Python<'_>, v: &[usize]) -> Py<PyArray1<i64>> {
 /// defaults and the same maps for the same options, on any number of
 /// threads).
 #[pyfunction]
-#[pyo3(signature = (a, b, *, refine = "default", k = 50, k_process = None, schedule = None, landmarks = None, w_orient = None, mirrored = false, non_isometric = false, area_normalize = true, starts = None, features = "descriptors", model = None, adapt = 0, point_map = None, threads = None))]
+#[pyo3(signature = (a, b, *, refine = "default", k = 50, k_process = None, schedule = None, landmarks = None, w_orient = None, mirrored = false, non_isometric = false, second_opinion = false, area_normalize = true, starts = None, features = "descriptors", model = None, adapt = 0, point_map = None, threads = None))]
 #[allow(clippy::too_many_arguments)]
 fn match_shapes(
     py: Python<'_>,
@@ -358,6 +359,7 @@ fn match_shapes(
     w_orient: Option<f64>,
     mirrored: bool,
     non_isometric: bool,
+    second_opinion: bool,
     area_normalize: bool,
     starts: Option<Vec<usize>>,
     features: &str,
@@ -379,7 +381,7 @@ fn match_shapes(
         k,
         k_process.unwrap_or(MatchParams::default().k_process),
         w_orient,
-        (mirrored, non_isometric),
+        (mirrored, non_isometric, second_opinion),
         area_normalize,
     )?;
     if let Some(s) = starts {
@@ -456,8 +458,15 @@ fn result(
     if let Some(c) = r.confidence {
         confidence.set_item("metric_distortion", c.distortion)?;
         confidence.set_item("long_range", c.long_range)?;
+        confidence.set_item("area_distortion", c.area_distortion)?;
         confidence.set_item("likely_wrong", c.likely_wrong)?;
-        confidence.set_item("warn_above", fmaps::pipeline::Confidence::WARN_ABOVE)?;
+        let warn = PyDict::new(py);
+        warn.set_item("metric_distortion", fmaps::pipeline::Confidence::WARN_ABOVE)?;
+        warn.set_item(
+            "area_distortion",
+            fmaps::pipeline::Confidence::WARN_AREA_ABOVE,
+        )?;
+        confidence.set_item("warn_above", warn)?;
         confidence.set_item("advice", c.advice())?;
     }
     Ok(MatchResult {
@@ -661,7 +670,7 @@ fn prepare(
 /// `area_normalize` are the shapes'). Quality scores are computed on the
 /// prepared (unit-area) meshes.
 #[pyfunction]
-#[pyo3(signature = (a, b, *, refine = "default", k = 50, schedule = None, landmarks = None, w_orient = None, mirrored = false, non_isometric = false, starts = None, features = "descriptors", model = None, adapt = 0, point_map = None, threads = None))]
+#[pyo3(signature = (a, b, *, refine = "default", k = 50, schedule = None, landmarks = None, w_orient = None, mirrored = false, non_isometric = false, second_opinion = false, starts = None, features = "descriptors", model = None, adapt = 0, point_map = None, threads = None))]
 #[allow(clippy::too_many_arguments)]
 fn match_prepared(
     py: Python<'_>,
@@ -674,6 +683,7 @@ fn match_prepared(
     w_orient: Option<f64>,
     mirrored: bool,
     non_isometric: bool,
+    second_opinion: bool,
     starts: Option<Vec<usize>>,
     features: &str,
     model: Option<PathBuf>,
@@ -700,7 +710,7 @@ fn match_prepared(
         k,
         k_process,
         w_orient,
-        (mirrored, non_isometric),
+        (mirrored, non_isometric, second_opinion),
         a.area_normalize,
     )?;
     if let Some(s) = starts {

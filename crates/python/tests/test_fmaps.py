@@ -73,6 +73,18 @@ def test_the_non_isometric_setting_matches_the_bodies(pairs):
     assert e["mean_error"] < 0.05, e["mean_error"]
 
 
+def test_a_second_opinion_keeps_the_less_distorting_setting(pairs):
+    p = pairs[1]
+    both = fmaps.match_shapes(p["a"], p["b"], second_opinion=True, threads=2)
+    assert both.refiner.startswith("best of (smooth-shells"), both.refiner
+    # The kept map is one of the two settings' maps, the one of least area
+    # distortion.
+    one = fmaps.match_shapes(p["a"], p["b"], threads=2)
+    other = fmaps.match_shapes(p["a"], p["b"], non_isometric=True, threads=2)
+    kept = min((one, other), key=lambda r: r.confidence["area_distortion"])
+    assert np.array_equal(both.map_ab, kept.map_ab)
+
+
 def faust(name):
     path = FAUST / f"{name}.off"
     if not path.is_file():

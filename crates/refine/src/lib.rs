@@ -69,6 +69,7 @@
 #![deny(missing_docs)]
 #![forbid(unsafe_code)]
 
+mod best_of;
 pub mod conformance;
 mod discrete;
 mod icp;
@@ -84,6 +85,7 @@ use std::fmt;
 use fmaps_eigensolve::SpectralBasis;
 use nalgebra::DMatrix;
 
+pub use best_of::BestOf;
 pub use discrete::{DiscreteOp, DiscreteWeights};
 pub use icp::Icp;
 pub use orientation::{area_distortion, orientation_score};

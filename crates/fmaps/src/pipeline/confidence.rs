@@ -1,9 +1,16 @@
-//! How far a map can be trusted, without ground truth: the metric
-//! distortion of the final map ([`crate::eval::metric_distortion`]), which
-//! sees the global misalignments (a head on a foot, a front on a back)
-//! that a locally smooth map hides from area and conformal distortion,
-//! and a warning above a threshold measured on the benchmarks
-//! (`cargo xtask confidence`; docs/benchmarks.md).
+//! How far a map can be trusted, without ground truth: two distortions of
+//! the final map and a warning when either is above its threshold,
+//! measured on the benchmarks (`cargo xtask confidence`;
+//! docs/benchmarks.md, section Confidence):
+//!
+//! - the metric distortion ([`crate::eval::metric_distortion`]) sees the
+//!   global misalignments of a map that is noisy or torn (a head on a
+//!   foot, a front on a back): distances between far-apart points change;
+//! - the area distortion ([`crate::refine::area_distortion`]) sees those
+//!   of a map that is smooth but aligned the wrong way round (Smooth
+//!   Shells' failures between different builds: a limb on the wrong limb
+//!   keeps distances about as well as the right one, but stretches and
+//!   squeezes the surface).
 
 use std::time::Instant;
 
@@ -23,8 +30,14 @@ pub struct Confidence {
     pub distortion: f64,
     /// The same over the samples at least the median distance apart.
     pub long_range: f64,
-    /// `distortion` is above [`Confidence::WARN_ABOVE`]: the map is likely
-    /// globally wrong.
+    /// Area distortion of the map: the area-weighted mean of `|ln(image
+    /// area / face area)|`, both shapes at unit area (about 0.3-0.5 for a
+    /// right map, 0.5-0.75 for one aligned the wrong way round between
+    /// different builds).
+    pub area_distortion: f64,
+    /// `distortion` is above [`Confidence::WARN_ABOVE`] or
+    /// `area_distortion` above [`Confidence::WARN_AREA_ABOVE`]: the map is
+    /// likely globally wrong.
     pub likely_wrong: bool,
     /// Seconds to compute it.
     pub seconds: f64,
@@ -35,6 +48,8 @@ impl Confidence {
     pub const SAMPLES: usize = 48;
     /// Above this metric distortion a map is reported as likely wrong.
     pub const WARN_ABOVE: f64 = 0.3;
+    /// Above this area distortion a map is reported as likely wrong.
+    pub const WARN_AREA_ABOVE: f64 = 0.55;
 
     /// The confidence of `t_ab` between two prepared shapes.
     pub fn of_map(
@@ -49,10 +64,13 @@ impl Confidence {
         };
         let d = crate::eval::metric_distortion(t_ab, &mesh(a)?, &mesh(b)?, Self::SAMPLES)
             .map_err(|e| MatchError::InvalidParameter(format!("confidence: {e}")))?;
+        let area =
+            crate::refine::area_distortion(t_ab, &a.vertices, &a.faces, &b.vertices, &b.faces)?;
         Ok(Confidence {
             distortion: d.mean,
             long_range: d.long_range,
-            likely_wrong: d.mean > Self::WARN_ABOVE,
+            area_distortion: area,
+            likely_wrong: d.mean > Self::WARN_ABOVE || area > Self::WARN_AREA_ABOVE,
             seconds: t.elapsed().as_secs_f64(),
         })
     }
@@ -60,7 +78,7 @@ impl Confidence {
     /// What to try when the map is likely wrong (`None` otherwise).
     pub fn advice(&self) -> Option<&'static str> {
         self.likely_wrong.then_some(
-            "the map distorts distances as a globally misaligned map does; for shapes of different proportions try the non-isometric setting, or give 3-5 landmark pairs",
+            "the map distorts distances or areas as a globally misaligned map does; for shapes of different proportions try the second opinion (both Smooth Shells settings), or give 3-5 landmark pairs",
         )
     }
 }

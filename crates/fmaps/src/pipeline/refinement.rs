@@ -259,6 +259,11 @@ pub struct RefineOptions {
     /// ([`crate::refine::SmoothShells::non_isometric`], about the
     /// default's time). Other refinements ignore it.
     pub non_isometric: bool,
+    /// Smooth Shells runs both settings (the default's two orientations and
+    /// the non-isometric eight-orientation screen) and keeps the map of
+    /// least area distortion ([`crate::refine::BestOf`]; twice the time).
+    /// Other refinements ignore it.
+    pub second_opinion: bool,
 }
 
 impl Default for RefineOptions {
@@ -273,6 +278,7 @@ impl Default for RefineOptions {
             sinkhorn: false,
             mirrored: false,
             non_isometric: false,
+            second_opinion: false,
         }
     }
 }
@@ -336,14 +342,24 @@ pub fn named_refinement(
     Ok(match kind {
         RefinerKind::None => Refinement::None,
         RefinerKind::Bcicp => Refinement::Custom(Arc::new(refine::Repair::default())),
-        RefinerKind::SmoothShells => Refinement::Custom(Arc::new(refine::SmoothShells {
-            reflect: options.mirrored,
-            ..if options.non_isometric {
-                refine::SmoothShells::non_isometric()
+        RefinerKind::SmoothShells => {
+            let shells = |non_isometric: bool| refine::SmoothShells {
+                reflect: options.mirrored,
+                ..if non_isometric {
+                    refine::SmoothShells::non_isometric()
+                } else {
+                    refine::SmoothShells::default()
+                }
+            };
+            if options.second_opinion {
+                Refinement::Custom(Arc::new(refine::BestOf::new(vec![
+                    Arc::new(shells(false)),
+                    Arc::new(shells(true)),
+                ])?))
             } else {
-                refine::SmoothShells::default()
+                Refinement::Custom(Arc::new(shells(options.non_isometric)))
             }
-        })),
+        }
         RefinerKind::Icp => Refinement::Icp(Icp {
             max_iterations: options.icp_iterations,
             adjoint: options.adjoint,
@@ -439,5 +455,35 @@ pub fn default_select_at(refine: &Refinement) -> Option<usize> {
             (mid > zoomout.k_start && mid < zoomout.k_final).then_some(mid)
         }
         _ => None,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A second opinion runs both Smooth Shells settings, the default's
+    /// first (kept on a tie), and needs the eigenpairs of either; other
+    /// refinements ignore it.
+    #[test]
+    fn a_second_opinion_is_both_smooth_shells_settings() {
+        let options = RefineOptions {
+            second_opinion: true,
+            ..RefineOptions::default()
+        };
+        let r = named_refinement(RefinerKind::SmoothShells, &options).unwrap();
+        let Refinement::Custom(best) = &r else {
+            panic!("{r:?}")
+        };
+        let default = refine::SmoothShells::default().name();
+        let screen = refine::SmoothShells::non_isometric().name();
+        assert_eq!(
+            best.name(),
+            format!("best of ({default} | {screen}) by area distortion")
+        );
+        assert_eq!(r.k_needed(), refine::SmoothShells::default().k_needed());
+        let z = named_refinement(RefinerKind::Zoomout, &options).unwrap();
+        let plain = named_refinement(RefinerKind::Zoomout, &RefineOptions::default()).unwrap();
+        assert_eq!(format!("{z:?}"), format!("{plain:?}"));
     }
 }

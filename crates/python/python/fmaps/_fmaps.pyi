@@ -67,7 +67,7 @@ class MatchResult:
     orientation: float
     """Orientation score of `map_ab` (near 1 preserved, near -1 mirrored)."""
     confidence: dict
-    """Without ground truth: metric_distortion, long_range, likely_wrong (above warn_above: likely globally misaligned), warn_above, advice."""
+    """Without ground truth: metric_distortion, long_range, area_distortion, likely_wrong (either above its warn_above: likely globally misaligned), warn_above, advice."""
     times: dict
     """Seconds per stage (spectra, descriptors, operators, solve, point_map, refine, total)."""
     quality: dict
@@ -94,6 +94,7 @@ def match_shapes(
     w_orient: Optional[float] = None,
     mirrored: bool = False,
     non_isometric: bool = False,
+    second_opinion: bool = False,
     area_normalize: bool = True,
     starts: Optional[list] = None,
     features: str = "descriptors",
@@ -110,6 +111,7 @@ def match_shapes(
     for ZoomOut and the discrete presets; landmarks: (vertex of A, vertex of B) pairs, 0-based; starts: further initial sizes ([] = one start; None = the CLI's default);
     k_process: eigenpairs computed (None: those the pipeline uses, as the CLI: 200 for Smooth Shells, 150 for ZoomOut);
     non_isometric: the shapes are not near-isometric (different people or animals), as `fmaps match --non-isometric`.
+    second_opinion: Smooth Shells runs both settings (default and non-isometric) and keeps the map of least area distortion, as `fmaps match --second-opinion` (twice the time).
     As the CLI, a ZoomOut runs its iterations on 5000 farthest points per shape when a mesh has more than 20000
     vertices (then one iteration and the final map on every vertex; the result's refiner name says so)."""
 
@@ -129,6 +131,7 @@ def match_prepared(
     w_orient: Optional[float] = None,
     mirrored: bool = False,
     non_isometric: bool = False,
+    second_opinion: bool = False,
     starts: Optional[list] = None,
     features: str = "descriptors",
     model: Optional[str] = None,
