@@ -115,6 +115,10 @@ struct PipelineCache {
 
 impl MapSource {
     fn open(c: &Collection, method: &str, peer_dir: &std::path::Path) -> anyhow::Result<MapSource> {
+        if method.starts_with("saved:") {
+            // The saved maps' directory names the method with its modifiers.
+            return MapSource::open_nn(c, method, peer_dir);
+        }
         // `METHOD+sinkhorn`: the refiner converts with the Fast Sinkhorn
         // Filter.
         let (method, sinkhorn) = match method.split_once("+sinkhorn") {

@@ -22,7 +22,7 @@ use super::{MatchError, PreparedShape};
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Confidence {
     /// Metric distortion of the map: `Σ |d_B(T x, T y) − d_A(x, y)| /
-    /// Σ d_A(x, y)` over pairs of [`Confidence::SAMPLES`] points spread over
+    /// Σ d_A(x, y)` over pairs of [`Confidence::samples_for`] points spread over
     /// the source, edge-path distances at unit area (0: distances kept, as
     /// by an isometry or a symmetry; about 0.1 for a right map between
     /// poses of one body, 0.15-0.3 between different bodies, 0.4-0.6 for an
@@ -44,12 +44,24 @@ pub struct Confidence {
 }
 
 impl Confidence {
-    /// Samples of the metric distortion.
+    /// Samples of the metric distortion (fewer on large meshes: see
+    /// [`Confidence::samples_for`]).
     pub const SAMPLES: usize = 48;
     /// Above this metric distortion a map is reported as likely wrong.
     pub const WARN_ABOVE: f64 = 0.3;
     /// Above this area distortion a map is reported as likely wrong.
     pub const WARN_AREA_ABOVE: f64 = 0.55;
+
+    /// Samples for a source of `n` vertices: [`Confidence::SAMPLES`] up to
+    /// 100,000 vertices, then fewer in proportion (at least 16), so that
+    /// the `2 samples` Dijkstra runs stay a small part of a match.
+    pub fn samples_for(n: usize) -> usize {
+        if n <= 100_000 {
+            Self::SAMPLES
+        } else {
+            (Self::SAMPLES * 100_000 / n).max(16)
+        }
+    }
 
     /// The confidence of `t_ab` between two prepared shapes.
     pub fn of_map(
@@ -62,7 +74,8 @@ impl Confidence {
             TriMesh::new(s.vertices.clone(), s.faces.clone())
                 .map_err(|e| MatchError::InvalidParameter(format!("confidence: {e}")))
         };
-        let d = crate::eval::metric_distortion(t_ab, &mesh(a)?, &mesh(b)?, Self::SAMPLES)
+        let samples = Self::samples_for(a.vertices.len());
+        let d = crate::eval::metric_distortion(t_ab, &mesh(a)?, &mesh(b)?, samples)
             .map_err(|e| MatchError::InvalidParameter(format!("confidence: {e}")))?;
         let area =
             crate::refine::area_distortion(t_ab, &a.vertices, &a.faces, &b.vertices, &b.faces)?;
@@ -104,6 +117,9 @@ mod tests {
         let torn: Vec<usize> = (0..n).map(|i| pair.truth[(i + n / 2) % n]).collect();
         let bad = Confidence::of_map(&torn, &a, &b).unwrap();
         assert!(bad.likely_wrong && bad.advice().is_some(), "{bad:?}");
+        // Fewer samples on large meshes, never fewer than 16.
+        let ns = [5_000, 100_000, 200_000, 1_000_000].map(Confidence::samples_for);
+        assert_eq!(ns, [48, 48, 24, 16]);
         // And the pipeline reports the confidence of its own map.
         let r = crate::pipeline::match_prepared(&a, &b, &params).unwrap();
         let own = r.confidence.unwrap();
