@@ -67,8 +67,10 @@ pub(crate) fn collection_pairs(
 }
 
 /// `n` indices into `points` (vertices of `mesh`) spread by farthest-point
-/// sampling in space, from the point farthest from the mean: on a body,
-/// the tips of head, hands, feet and tail first.
+/// sampling in space with the points' mean counted as taken (unlike
+/// `fmaps::refine::farthest_point_sampling`, which starts from a point):
+/// every pick is the point farthest from the mean and the picks so far,
+/// so on a body the tips of head, hands, feet and tail come first.
 pub(crate) fn farthest_points(mesh: &TriMesh, points: &[usize], n: usize) -> Vec<usize> {
     let v = mesh.vertices();
     let p: Vec<[f64; 3]> = points.iter().map(|&i| v[i]).collect();

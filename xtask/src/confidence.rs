@@ -100,7 +100,20 @@ pub fn confidence(args: &Args) -> anyhow::Result<()> {
     let bcicp = bcicp_dir(args.data.as_deref())?;
     let out_dir = root().join("target/eval");
     for cname in &args.collections {
-        let (c, _) = crate::eval::collection_pairs(&bcicp, cname)?;
+        let (c, pairs) = crate::eval::collection_pairs(&bcicp, cname)?;
+        // Every shape of the collection's pairs, read once for all methods.
+        let mut names: Vec<&String> = pairs.iter().flat_map(|(a, b)| [a, b]).collect();
+        names.sort();
+        names.dedup();
+        let meshes: std::collections::HashMap<String, fmaps::mesh_io::TriMesh> = names
+            .par_iter()
+            .map(|&s| Ok((s.clone(), c.read_mesh(s)?)))
+            .collect::<anyhow::Result<_>>()?;
+        let mesh = |s: &str| {
+            meshes
+                .get(s)
+                .with_context(|| format!("{s} is not a shape of {cname}'s pairs"))
+        };
         let mut by_method = Vec::new();
         let mut report = Vec::new();
         println!("{cname}: bad = mean error above {} x100", args.bad);
@@ -135,9 +148,9 @@ pub fn confidence(args: &Args) -> anyhow::Result<()> {
                         p["target"].as_str().unwrap_or_default(),
                     );
                     let t = fmaps::mesh_io::read_map(maps_dir.join(format!("{a}_{b}.map")))?;
-                    let (ma, mb) = (c.read_mesh(a)?, c.read_mesh(b)?);
-                    let d = metric_distortion(&t, &ma, &mb, args.samples)?;
-                    let q = map_quality(&t, &ma, &mb, None)?;
+                    let (ma, mb) = (mesh(a)?, mesh(b)?);
+                    let d = metric_distortion(&t, ma, mb, args.samples)?;
+                    let q = map_quality(&t, ma, mb, None)?;
                     Ok(Scored {
                         source: a.to_string(),
                         target: b.to_string(),
@@ -243,8 +256,8 @@ pub fn confidence(args: &Args) -> anyhow::Result<()> {
                     let read =
                         |d: &PathBuf| fmaps::mesh_io::read_map(d.join(format!("{a}_{b}.map")));
                     let (t0, t1) = (read(&dirs[0])?, read(&dirs[1])?);
-                    let (ma, mb) = (c.read_mesh(a)?, c.read_mesh(b)?);
-                    let solver = fmaps::geodesic::DijkstraSolver::new(&mb);
+                    let (ma, mb) = (mesh(a)?, mesh(b)?);
+                    let solver = fmaps::geodesic::DijkstraSolver::new(mb);
                     let samples =
                         fmaps::refine::farthest_point_sampling(ma.vertices(), args.samples, 0);
                     let mut sum = 0.0;
