@@ -23,6 +23,7 @@ mod refine_cmd;
 mod render_cmd;
 mod spectrum;
 mod train_cmd;
+mod weights;
 
 use eval::eval;
 use geodesic::geodesic;

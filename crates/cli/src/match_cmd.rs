@@ -41,9 +41,8 @@ pub(crate) struct MatchArgs {
     /// target) per line, or one index used on both shapes.
     #[arg(long)]
     landmarks: Option<PathBuf>,
-    /// Relative weight of the orientation-preserving term (0 = off).
-    #[arg(long, default_value_t = defaults().energy.weights.orient)]
-    w_orient: f64,
+    #[command(flatten)]
+    weights: crate::weights::WeightFlags,
     /// Refinement of the initial map. Default: smooth-shells (the most
     /// accurate here, near-isometric and non-isometric; docs/benchmarks.md),
     /// or zoomout when only --zoomout is given; `none` keeps the initial
@@ -312,7 +311,7 @@ pub(crate) fn params_of(args: &MatchArgs, sizes: (usize, usize)) -> Result<Match
     if let Some(p) = &args.landmarks {
         d.landmarks = read_landmarks(p)?.pairs;
     }
-    params.energy.weights.orient = args.w_orient;
+    params.energy.weights = args.weights.weights();
     params.energy.orient_reversing = args.mirrored;
     params.adjoint = args.refiner.adjoint;
     params.area_normalize = !args.no_area_normalize;

@@ -524,6 +524,23 @@ fn nasty_options_and_side_files() {
         (vec!["--k", "0"], 2, ""),
         (vec!["--k", "18446744073709551615"], 2, ""),
         (vec!["--w-orient", "nan"], 2, ""),
+        (vec!["--w-lap", "-1"], 2, "weights must be >= 0"),
+        (vec!["--w-descr", "inf"], 2, "weights must be >= 0"),
+        (
+            vec![
+                "--w-descr",
+                "0",
+                "--w-lap",
+                "0",
+                "--w-dcomm",
+                "0",
+                "--w-orient",
+                "0",
+            ],
+            2,
+            "positive sum",
+        ),
+        (vec!["--w-dcomm", "0.5"], 0, ""),
     ];
     for (extra, want, says) in cases {
         let mut args: Vec<&str> = base.to_vec();

@@ -22,6 +22,7 @@
 //! GIL-free runner, and each is a thin call into the facade.)
 #![deny(unsafe_code)]
 
+mod convert;
 mod learned;
 mod stages;
 
@@ -30,8 +31,9 @@ use std::sync::Arc;
 
 use fmaps::mesh_io::TriMesh;
 use fmaps::pipeline::{MatchParams, RefineOptions, RefineSampling, RefinerKind};
+use fmaps::solve::PerTerm;
 use nalgebra::DMatrix;
-use numpy::ndarray::{Array1, Array2, ShapeBuilder};
+use numpy::ndarray::{Array1, Array2, Array3, ShapeBuilder};
 use numpy::{IntoPyArray, PyArray1, PyArray2, PyReadonlyArray1, PyReadonlyArray2};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
@@ -43,10 +45,6 @@ pyo3::create_exception!(
     PyValueError,
     "Bad input or a failed computation; the message is the one `fmaps` prints."
 );
-
-/// Vertex indices from Python: an int64 array or any sequence of integers
-/// (a list converts; floats do not).
-type Indices<'py> = numpy::PyArrayLike1<'py, i64>;
 
 /// The error of a fmaps call, with its causes (as the CLI prints them).
 fn err(e: impl std::fmt::Display) -> PyErr {
@@ -82,36 +80,30 @@ struct Mesh {
 
 #[pymethods]
 impl Mesh {
-    /// A mesh from `vertices` (n x 3 float64) and `faces` (m x 3
-    /// integers, 0-based).
+    /// A mesh from `vertices` (n x 3 coordinates: any real array-like,
+    /// float32 or float64, lists) and `faces` (m x 3 vertex indices,
+    /// 0-based: any integer array-like, int32, uint32, int64, lists).
     #[new]
-    fn new(
-        vertices: PyReadonlyArray2<'_, f64>,
-        faces: PyReadonlyArray2<'_, i64>,
-    ) -> PyResult<Self> {
-        let v = vertices.as_array();
-        let f = faces.as_array();
-        if v.ncols() != 3 || f.ncols() != 3 {
-            return Err(err(format!(
-                "vertices must be n x 3 and faces m x 3, got {:?} and {:?}",
-                v.shape(),
-                f.shape()
-            )));
-        }
-        let verts: Vec<[f64; 3]> = v.rows().into_iter().map(|r| [r[0], r[1], r[2]]).collect();
-        let mut tris = Vec::with_capacity(f.nrows());
-        for (i, r) in f.rows().into_iter().enumerate() {
-            let mut t = [0usize; 3];
-            for (d, &x) in r.iter().enumerate() {
-                t[d] = usize::try_from(x)
-                    .map_err(|_| err(format!("face {i}: negative vertex index {x}")))?;
-            }
-            tris.push(t);
-        }
-        let mesh = TriMesh::new(verts, tris).map_err(err)?;
-        Ok(Mesh {
-            inner: Arc::new(mesh),
-        })
+    fn new(vertices: &Bound<'_, PyAny>, faces: &Bound<'_, PyAny>) -> PyResult<Self> {
+        let v = convert::floats2(vertices, "vertices")?;
+        let f = convert::ints2(faces, "faces", 3)?;
+        Self::from_arrays(&v, &f)
+    }
+
+    /// Pickling (and Ray, multiprocessing): rebuilt from its vertices and
+    /// faces, validated again.
+    #[allow(clippy::type_complexity)]
+    fn __reduce__<'py>(
+        slf: &Bound<'py, Self>,
+    ) -> PyResult<(Bound<'py, PyAny>, (Bound<'py, PyAny>, Bound<'py, PyAny>))> {
+        let m = slf.get();
+        Ok((
+            slf.get_type().into_any(),
+            (
+                m.vertices(slf.py()).into_any(),
+                m.faces(slf.py()).into_any(),
+            ),
+        ))
     }
 
     /// Reads an OFF, OBJ or PLY file (errors name the file and line).
@@ -209,6 +201,37 @@ impl Mesh {
     }
 }
 
+impl Mesh {
+    /// A mesh from float64 vertices and int64 faces, validated.
+    fn from_arrays(
+        vertices: &PyReadonlyArray2<'_, f64>,
+        faces: &PyReadonlyArray2<'_, i64>,
+    ) -> PyResult<Self> {
+        let (v, f) = (vertices.as_array(), faces.as_array());
+        if v.ncols() != 3 || f.ncols() != 3 {
+            return Err(err(format!(
+                "vertices must be n x 3 and faces m x 3, got {:?} and {:?}",
+                v.shape(),
+                f.shape()
+            )));
+        }
+        let verts: Vec<[f64; 3]> = v.rows().into_iter().map(|r| [r[0], r[1], r[2]]).collect();
+        let mut tris = Vec::with_capacity(f.nrows());
+        for (i, r) in f.rows().into_iter().enumerate() {
+            let mut t = [0usize; 3];
+            for (d, &x) in r.iter().enumerate() {
+                t[d] = usize::try_from(x)
+                    .map_err(|_| err(format!("face {i}: negative vertex index {x}")))?;
+            }
+            tris.push(t);
+        }
+        let mesh = TriMesh::new(verts, tris).map_err(err)?;
+        Ok(Mesh {
+            inner: Arc::new(mesh),
+        })
+    }
+}
+
 /// The first `k` Laplace–Beltrami eigenpairs of `mesh` as given (cotangent
 /// Laplacian, lumped mass): `(eigenvalues (k,), basis (n x k, Fortran
 /// order, orthonormal in the mass), mass (n,))`.
@@ -257,7 +280,7 @@ fn params_for(
     (n_a, n_b): (usize, usize),
     k: usize,
     k_process: usize,
-    w_orient: Option<f64>,
+    weights: PerTerm,
     (mirrored, non_isometric, second_opinion): (bool, bool, bool),
     area_normalize: bool,
 ) -> PyResult<MatchParams> {
@@ -267,9 +290,7 @@ fn params_for(
     p.descriptors.eigenpairs = MatchParams::default().descriptors.eigenpairs.min(k_process);
     p.energy.orient_reversing = mirrored;
     p.area_normalize = area_normalize;
-    if let Some(w) = w_orient {
-        p.energy.weights.orient = w;
-    }
+    p.energy.weights = weights;
     let kind = refiner_kind(refine, n_a.min(n_b))?;
     let mut options = RefineOptions::for_map_size(k);
     options.schedule = schedule;
@@ -323,6 +344,19 @@ struct MatchResult {
     seconds_per_iteration: Vec<f64>,
 }
 
+/// A pickled [`MatchResult`]'s fields, in declaration order.
+type MatchResultState = (
+    Py<PyArray1<i64>>,
+    Py<PyArray1<i64>>,
+    Py<PyArray2<f64>>,
+    f64,
+    Py<PyDict>,
+    Py<PyDict>,
+    Py<PyDict>,
+    String,
+    Vec<f64>,
+);
+
 #[pymethods]
 impl MatchResult {
     fn __repr__(&self) -> String {
@@ -330,6 +364,47 @@ impl MatchResult {
             "MatchResult(refiner={:?}, orientation={:.3})",
             self.refiner, self.orientation
         )
+    }
+
+    /// Pickling: the fields (numpy arrays, dicts, numbers).
+    fn __reduce__<'py>(
+        &self,
+        py: Python<'py>,
+    ) -> PyResult<(Bound<'py, PyAny>, (MatchResultState,))> {
+        let state = (
+            self.map_ab.clone_ref(py),
+            self.map_ab_init.clone_ref(py),
+            self.c_ba.clone_ref(py),
+            self.orientation,
+            self.confidence.clone_ref(py),
+            self.times.clone_ref(py),
+            self.quality.clone_ref(py),
+            self.refiner.clone(),
+            self.seconds_per_iteration.clone(),
+        );
+        Ok((
+            py.import("fmaps._fmaps")?
+                .getattr("_match_result_from_state")?,
+            (state,),
+        ))
+    }
+}
+
+/// Rebuilds a [`MatchResult`] from its pickled fields.
+#[pyfunction]
+fn _match_result_from_state(state: MatchResultState) -> MatchResult {
+    let (map_ab, map_ab_init, c_ba, orientation, confidence, times, quality, refiner, seconds) =
+        state;
+    MatchResult {
+        map_ab,
+        map_ab_init,
+        c_ba,
+        orientation,
+        confidence,
+        times,
+        quality,
+        refiner,
+        seconds_per_iteration: seconds,
     }
 }
 
@@ -345,7 +420,7 @@ fn indices(py: Python<'_>, v: &[usize]) -> Py<PyArray1<i64>> {
 /// defaults and the same maps for the same options, on any number of
 /// threads).
 #[pyfunction]
-#[pyo3(signature = (a, b, *, refine = "default", k = 50, k_process = None, schedule = None, landmarks = None, w_orient = None, mirrored = false, non_isometric = false, second_opinion = false, area_normalize = true, starts = None, features = "descriptors", model = None, adapt = 0, point_map = None, threads = None))]
+#[pyo3(signature = (a, b, *, refine = "default", k = 50, k_process = None, schedule = None, landmarks = None, w_descr = 0.1, w_lap = 0.001, w_dcomm = 1.0, w_orient = 1.0, mirrored = false, non_isometric = false, second_opinion = false, area_normalize = true, starts = None, features = "descriptors", model = None, adapt = 0, point_map = None, threads = None))]
 #[allow(clippy::too_many_arguments)]
 fn match_shapes(
     py: Python<'_>,
@@ -355,8 +430,11 @@ fn match_shapes(
     k: usize,
     k_process: Option<usize>,
     schedule: Option<String>,
-    landmarks: Option<Vec<(i64, i64)>>,
-    w_orient: Option<f64>,
+    landmarks: Option<Bound<'_, PyAny>>,
+    w_descr: f64,
+    w_lap: f64,
+    w_dcomm: f64,
+    w_orient: f64,
     mirrored: bool,
     non_isometric: bool,
     second_opinion: bool,
@@ -380,7 +458,12 @@ fn match_shapes(
         sizes,
         k,
         k_process.unwrap_or(MatchParams::default().k_process),
-        w_orient,
+        PerTerm {
+            descr: w_descr,
+            lap: w_lap,
+            dcomm: w_dcomm,
+            orient: w_orient,
+        },
         (mirrored, non_isometric, second_opinion),
         area_normalize,
     )?;
@@ -606,7 +689,7 @@ fn _prepared_from_state(
     ),
 ) -> PyResult<PreparedShape> {
     let (v, f, evals, vecs, mass, (area, input_area, scale, seconds, area_normalize)) = state;
-    let mesh = Mesh::new(v, f)?;
+    let mesh = Mesh::from_arrays(&v, &f)?;
     let vecs = vecs.as_array();
     let (n, k) = (vecs.nrows(), vecs.ncols());
     if n != mesh.inner.n_vertices() || evals.len()? != k || mass.len()? != n {
@@ -670,7 +753,7 @@ fn prepare(
 /// `area_normalize` are the shapes'). Quality scores are computed on the
 /// prepared (unit-area) meshes.
 #[pyfunction]
-#[pyo3(signature = (a, b, *, refine = "default", k = 50, schedule = None, landmarks = None, w_orient = None, mirrored = false, non_isometric = false, second_opinion = false, starts = None, features = "descriptors", model = None, adapt = 0, point_map = None, threads = None))]
+#[pyo3(signature = (a, b, *, refine = "default", k = 50, schedule = None, landmarks = None, w_descr = 0.1, w_lap = 0.001, w_dcomm = 1.0, w_orient = 1.0, mirrored = false, non_isometric = false, second_opinion = false, starts = None, features = "descriptors", model = None, adapt = 0, point_map = None, threads = None))]
 #[allow(clippy::too_many_arguments)]
 fn match_prepared(
     py: Python<'_>,
@@ -679,8 +762,11 @@ fn match_prepared(
     refine: &str,
     k: usize,
     schedule: Option<String>,
-    landmarks: Option<Vec<(i64, i64)>>,
-    w_orient: Option<f64>,
+    landmarks: Option<Bound<'_, PyAny>>,
+    w_descr: f64,
+    w_lap: f64,
+    w_dcomm: f64,
+    w_orient: f64,
     mirrored: bool,
     non_isometric: bool,
     second_opinion: bool,
@@ -709,7 +795,12 @@ fn match_prepared(
         sizes,
         k,
         k_process,
-        w_orient,
+        PerTerm {
+            descr: w_descr,
+            lap: w_lap,
+            dcomm: w_dcomm,
+            orient: w_orient,
+        },
         (mirrored, non_isometric, second_opinion),
         a.area_normalize,
     )?;
@@ -747,8 +838,10 @@ fn generated_body(py: Python<'_>, individual: usize, pose: usize) -> PyResult<Me
 
 /// Indices from Python (non-negative), checked against `n` vertices of
 /// `what`.
-fn checked(v: &PyReadonlyArray1<'_, i64>, n: usize, what: &str) -> PyResult<Vec<usize>> {
-    v.as_array()
+/// `v` is any integer array-like (see [`convert`]).
+fn checked(v: &Bound<'_, PyAny>, n: usize, what: &str) -> PyResult<Vec<usize>> {
+    convert::ints1(v, what)?
+        .as_array()
         .iter()
         .enumerate()
         .map(|(i, &x)| match usize::try_from(x) {
@@ -760,16 +853,18 @@ fn checked(v: &PyReadonlyArray1<'_, i64>, n: usize, what: &str) -> PyResult<Vec<
         .collect()
 }
 
-/// `map_ab` checked as a map from a shape of `na` vertices to one of `nb`:
-/// one entry per vertex of A, each a vertex of B.
-fn map_between(map_ab: &PyReadonlyArray1<'_, i64>, na: usize, nb: usize) -> PyResult<Vec<usize>> {
-    if map_ab.len()? != na {
+/// The map argument `name` checked as a map from a shape of `na`
+/// vertices to one of `nb`: one entry per vertex of the first, each a
+/// vertex of the second.
+fn map_between(map: &Bound<'_, PyAny>, na: usize, nb: usize, name: &str) -> PyResult<Vec<usize>> {
+    let t = checked(map, nb, name)?;
+    if t.len() != na {
         return Err(err(format!(
-            "map_ab has {} entries, A has {na} vertices",
-            map_ab.len()?
+            "{name} has {} entries, its source shape has {na} vertices",
+            t.len()
         )));
     }
-    checked(map_ab, nb, "map_ab")
+    Ok(t)
 }
 
 /// Geodesic errors of `map_ab` against ground truth, as `fmaps eval`
@@ -783,15 +878,20 @@ fn evaluate<'py>(
     py: Python<'py>,
     a: &Mesh,
     b: &Mesh,
-    map_ab: Indices<'_>,
-    gt_a: Indices<'_>,
-    gt_b: Indices<'_>,
-    gt_b_sym: Option<Indices<'_>>,
+    map_ab: Bound<'_, PyAny>,
+    gt_a: Bound<'_, PyAny>,
+    gt_b: Bound<'_, PyAny>,
+    gt_b_sym: Option<Bound<'_, PyAny>>,
     geodesic: &str,
     threads: Option<usize>,
 ) -> PyResult<Bound<'py, PyDict>> {
     let (na, nb) = (a.inner.n_vertices(), b.inner.n_vertices());
-    let t_ab = map_between(&map_ab, a.inner.n_vertices(), b.inner.n_vertices())?;
+    let t_ab = map_between(
+        &map_ab,
+        a.inner.n_vertices(),
+        b.inner.n_vertices(),
+        "map_ab",
+    )?;
     let gt = fmaps::eval::GroundTruth::new(
         checked(&gt_a, na, "gt_a")?,
         checked(&gt_b, nb, "gt_b")?,
@@ -881,27 +981,34 @@ fn demo_pairs(py: Python<'_>, subdivisions: u32) -> PyResult<Vec<Bound<'_, PyDic
         .collect()
 }
 
-/// Draws a map as a PNG (source left, target right, `path` written
-/// atomically): `kind="color"` colours the source by position and carries
-/// the colours to the target through `map_ab`; `"texture"` carries a
-/// checkerboard. `up` is the shapes' vertical axis ("x", "y", "z"), `yaw`
-/// a turn about it (degrees). Returns the picture's (width, height).
+/// Draws a map (source left, target right): `kind="color"` colours the
+/// source by position and carries the colours to the target through
+/// `map_ab`; `"texture"` carries a checkerboard. `up` is the shapes'
+/// vertical axis ("x", "y", "z"), `yaw` a turn about it (degrees). With
+/// `path`, writes a PNG there (atomically) and returns the picture's
+/// (width, height); without, returns the picture as a numpy array
+/// (height x width x 3, uint8 RGB).
 #[pyfunction]
-#[pyo3(signature = (a, b, map_ab, path, *, kind = "color", up = "y", yaw = 0.0, size = 480))]
+#[pyo3(signature = (a, b, map_ab, path = None, *, kind = "color", up = "y", yaw = 0.0, size = 480))]
 #[allow(clippy::too_many_arguments)]
-fn render_transfer(
-    py: Python<'_>,
+fn render_transfer<'py>(
+    py: Python<'py>,
     a: &Mesh,
     b: &Mesh,
-    map_ab: Indices<'_>,
-    path: PathBuf,
+    map_ab: Bound<'_, PyAny>,
+    path: Option<PathBuf>,
     kind: &str,
     up: &str,
     yaw: f64,
     size: usize,
-) -> PyResult<(usize, usize)> {
+) -> PyResult<Bound<'py, PyAny>> {
     use fmaps::viz::{Axis, View};
-    let t_ab = map_between(&map_ab, a.inner.n_vertices(), b.inner.n_vertices())?;
+    let t_ab = map_between(
+        &map_ab,
+        a.inner.n_vertices(),
+        b.inner.n_vertices(),
+        "map_ab",
+    )?;
     let axis = match up {
         "x" => Axis::X,
         "y" => Axis::Y,
@@ -932,18 +1039,28 @@ fn render_transfer(
             )));
         }
     };
-    py.detach(move || {
-        let (img, _, _) = if texture {
-            fmaps::pictures::texture_transfer(&ma, &mb, &t_ab, 12, &view)
-        } else {
-            fmaps::pictures::color_transfer(&ma, &mb, &t_ab, &view)
-        }
-        .map_err(|e| e.to_string())?;
-        img.save_png(&path)
-            .map_err(|e| format!("{}: {e}", path.display()))?;
-        Ok::<_, String>((img.width(), img.height()))
-    })
-    .map_err(err)
+    let to_file = path.is_some();
+    let img = py
+        .detach(move || {
+            let (img, _, _) = if texture {
+                fmaps::pictures::texture_transfer(&ma, &mb, &t_ab, 12, &view)
+            } else {
+                fmaps::pictures::color_transfer(&ma, &mb, &t_ab, &view)
+            }
+            .map_err(|e| e.to_string())?;
+            if let Some(path) = &path {
+                img.save_png(path)
+                    .map_err(|e| format!("{}: {e}", path.display()))?;
+            }
+            Ok::<_, String>(img)
+        })
+        .map_err(err)?;
+    let (w, h) = (img.width(), img.height());
+    if to_file {
+        return Ok((w, h).into_pyobject(py)?.into_any());
+    }
+    let rgb = Array3::from_shape_vec((h, w, 3), img.pixels().to_vec()).expect("h x w x 3");
+    Ok(rgb.into_pyarray(py).into_any())
 }
 
 /// The extension module.
@@ -956,6 +1073,7 @@ fn _fmaps(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(prepare, m)?)?;
     m.add_function(wrap_pyfunction!(match_prepared, m)?)?;
     m.add_function(wrap_pyfunction!(_prepared_from_state, m)?)?;
+    m.add_function(wrap_pyfunction!(_match_result_from_state, m)?)?;
     m.add_function(wrap_pyfunction!(generated_body, m)?)?;
     m.add_function(wrap_pyfunction!(render_transfer, m)?)?;
     m.add_function(wrap_pyfunction!(spectrum, m)?)?;

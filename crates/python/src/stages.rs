@@ -13,13 +13,15 @@ use fmaps::mesh_io::TriMesh;
 use fmaps::pipeline::{MatchParams, RefineOptions};
 use nalgebra::DMatrix;
 use numpy::ndarray::Array2;
-use numpy::{IntoPyArray, PyArray1, PyArray2, PyReadonlyArray1, PyReadonlyArray2};
+use numpy::{IntoPyArray, PyArray1, PyArray2};
 use pyo3::prelude::*;
 
-use crate::{Indices, Mesh, PreparedShape, checked, err, fortran, indices, refiner_kind, run};
+use crate::{Mesh, PreparedShape, checked, err, fortran, indices, refiner_kind, run};
 
-/// A numpy matrix (any layout) as a column-major matrix, checked finite.
-fn matrix(m: &PyReadonlyArray2<'_, f64>, what: &str) -> PyResult<DMatrix<f64>> {
+/// A matrix argument (any real array-like, any layout) as a column-major
+/// matrix, checked finite.
+fn matrix(m: &Bound<'_, PyAny>, what: &str) -> PyResult<DMatrix<f64>> {
+    let m = crate::convert::floats2(m, what)?;
     let a = m.as_array();
     if let Some(((i, j), _)) = a.indexed_iter().find(|(_, x)| !x.is_finite()) {
         return Err(err(format!("{what}: entry ({i}, {j}) is not finite")));
@@ -30,12 +32,14 @@ fn matrix(m: &PyReadonlyArray2<'_, f64>, what: &str) -> PyResult<DMatrix<f64>> {
 /// Landmark pairs (vertex of A, vertex of B), checked against shapes of
 /// `na` and `nb` vertices.
 pub(crate) fn landmark_pairs(
-    landmarks: Option<Vec<(i64, i64)>>,
+    landmarks: Option<Bound<'_, PyAny>>,
     na: usize,
     nb: usize,
 ) -> PyResult<Vec<(usize, usize)>> {
-    landmarks
-        .unwrap_or_default()
+    let Some(landmarks) = landmarks else {
+        return Ok(Vec::new());
+    };
+    crate::convert::pairs(&landmarks, "landmarks")?
         .into_iter()
         .enumerate()
         .map(|(i, (x, y))| match (usize::try_from(x), usize::try_from(y)) {
@@ -78,7 +82,7 @@ fn descriptors<'py>(
     kind: &str,
     n: usize,
     k: usize,
-    landmarks: Option<Indices<'_>>,
+    landmarks: Option<Bound<'_, PyAny>>,
     subsample: usize,
 ) -> PyResult<Bound<'py, PyArray2<f64>>> {
     if k == 0 {
@@ -103,33 +107,40 @@ fn descriptors<'py>(
 /// per-vertex features with corresponding columns (e.g. learned ones), or
 /// when not given the pipeline's (`kind`, `n`, `k_descr` (at most the
 /// shapes' eigenpairs), `landmarks`: pairs
-/// of 0-based vertices (of A, of B)). `w_orient`: weight of the
-/// orientation term (default the pipeline's); `mirrored`: B is a mirror
-/// image of A.
+/// of 0-based vertices (of A, of B)). `w_descr`, `w_lap`, `w_dcomm`,
+/// `w_orient`: relative weights of the energy's four terms (the
+/// pipeline's defaults; only their ratios matter); `mirrored`: B is a
+/// mirror image of A.
 #[pyfunction]
-#[pyo3(signature = (a, b, *, k = 50, descr_a = None, descr_b = None, kind = "wks", n = 100, k_descr = 128, landmarks = None, w_orient = None, mirrored = false, threads = None))]
+#[pyo3(signature = (a, b, *, k = 50, descr_a = None, descr_b = None, kind = "wks", n = 100, k_descr = 128, landmarks = None, w_descr = 0.1, w_lap = 0.001, w_dcomm = 1.0, w_orient = 1.0, mirrored = false, threads = None))]
 #[allow(clippy::too_many_arguments)]
 fn fit<'py>(
     py: Python<'py>,
     a: &PreparedShape,
     b: &PreparedShape,
     k: usize,
-    descr_a: Option<PyReadonlyArray2<'_, f64>>,
-    descr_b: Option<PyReadonlyArray2<'_, f64>>,
+    descr_a: Option<Bound<'_, PyAny>>,
+    descr_b: Option<Bound<'_, PyAny>>,
     kind: &str,
     n: usize,
     k_descr: usize,
-    landmarks: Option<Vec<(i64, i64)>>,
-    w_orient: Option<f64>,
+    landmarks: Option<Bound<'_, PyAny>>,
+    w_descr: f64,
+    w_lap: f64,
+    w_dcomm: f64,
+    w_orient: f64,
     mirrored: bool,
     threads: Option<usize>,
 ) -> PyResult<Bound<'py, PyArray2<f64>>> {
     let mut params = descriptor_params(kind, n, k_descr, 1)?;
     params.k = k;
     params.energy.orient_reversing = mirrored;
-    if let Some(w) = w_orient {
-        params.energy.weights.orient = w;
-    }
+    params.energy.weights = fmaps::solve::PerTerm {
+        descr: w_descr,
+        lap: w_lap,
+        dcomm: w_dcomm,
+        orient: w_orient,
+    };
     params.descriptors.landmarks = landmark_pairs(landmarks, a.inner.basis.n(), b.inner.basis.n())?;
     let given = match (&descr_a, &descr_b) {
         (Some(x), Some(y)) => {
@@ -169,7 +180,7 @@ fn fit<'py>(
 
 /// The first rows x cols of `c_ba` checked against the shapes' bases.
 fn fmap_of(
-    c_ba: &PyReadonlyArray2<'_, f64>,
+    c_ba: &Bound<'_, PyAny>,
     a: &PreparedShape,
     b: &PreparedShape,
 ) -> PyResult<DMatrix<f64>> {
@@ -194,7 +205,7 @@ fn fmap_of(
 #[pyo3(signature = (c_ba, a, b, *, adjoint = false, threads = None))]
 fn fmap_to_map<'py>(
     py: Python<'py>,
-    c_ba: PyReadonlyArray2<'_, f64>,
+    c_ba: Bound<'_, PyAny>,
     a: &PreparedShape,
     b: &PreparedShape,
     adjoint: bool,
@@ -221,7 +232,7 @@ fn fmap_to_map<'py>(
 #[pyo3(signature = (map_ab, a, b, *, k = 50))]
 fn map_to_fmap<'py>(
     py: Python<'py>,
-    map_ab: Indices<'_>,
+    map_ab: Bound<'_, PyAny>,
     a: &PreparedShape,
     b: &PreparedShape,
     k: usize,
@@ -244,11 +255,11 @@ fn map_to_fmap<'py>(
 
 /// `map_ab` checked as a map between two prepared shapes.
 fn prepared_map(
-    map_ab: &PyReadonlyArray1<'_, i64>,
+    map_ab: &Bound<'_, PyAny>,
     a: &PreparedShape,
     b: &PreparedShape,
 ) -> PyResult<Vec<usize>> {
-    crate::map_between(map_ab, a.inner.basis.n(), b.inner.basis.n())
+    crate::map_between(map_ab, a.inner.basis.n(), b.inner.basis.n(), "map_ab")
 }
 
 /// The result of [`refine`].
@@ -273,6 +284,18 @@ struct RefinedMap {
     seconds: f64,
 }
 
+/// A pickled [`RefinedMap`]'s fields, in declaration order.
+type RefinedMapState = (
+    Py<PyArray1<i64>>,
+    Py<PyArray2<f64>>,
+    Py<PyArray2<f64>>,
+    f64,
+    f64,
+    String,
+    Vec<f64>,
+    f64,
+);
+
 #[pymethods]
 impl RefinedMap {
     fn __repr__(&self) -> String {
@@ -280,6 +303,45 @@ impl RefinedMap {
             "RefinedMap(refiner={:?}, orientation {:.3} -> {:.3}, {:.2} s)",
             self.refiner, self.orientation_init, self.orientation, self.seconds
         )
+    }
+
+    /// Pickling: the fields (numpy arrays and numbers).
+    fn __reduce__<'py>(
+        &self,
+        py: Python<'py>,
+    ) -> PyResult<(Bound<'py, PyAny>, (RefinedMapState,))> {
+        let state = (
+            self.map_ab.clone_ref(py),
+            self.c_ba.clone_ref(py),
+            self.c_ba_init.clone_ref(py),
+            self.orientation_init,
+            self.orientation,
+            self.refiner.clone(),
+            self.seconds_per_iteration.clone(),
+            self.seconds,
+        );
+        Ok((
+            py.import("fmaps._fmaps")?
+                .getattr("_refined_map_from_state")?,
+            (state,),
+        ))
+    }
+}
+
+/// Rebuilds a [`RefinedMap`] from its pickled fields.
+#[pyfunction]
+fn _refined_map_from_state(state: RefinedMapState) -> RefinedMap {
+    let (map_ab, c_ba, c_ba_init, orientation_init, orientation, refiner, per_step, seconds) =
+        state;
+    RefinedMap {
+        map_ab,
+        c_ba,
+        c_ba_init,
+        orientation_init,
+        orientation,
+        refiner,
+        seconds_per_iteration: per_step,
+        seconds,
     }
 }
 
@@ -298,7 +360,7 @@ fn refine(
     py: Python<'_>,
     a: &PreparedShape,
     b: &PreparedShape,
-    map_ab: Indices<'_>,
+    map_ab: Bound<'_, PyAny>,
     method: &str,
     k: usize,
     schedule: Option<String>,
@@ -377,7 +439,7 @@ pub(crate) fn distance_solver(
 fn geodesics<'py>(
     py: Python<'py>,
     mesh: &Mesh,
-    sources: Indices<'_>,
+    sources: Bound<'_, PyAny>,
     method: &str,
     per_source: bool,
     threads: Option<usize>,
@@ -425,12 +487,14 @@ fn map_quality<'py>(
     py: Python<'py>,
     a: &Mesh,
     b: &Mesh,
-    map_ab: Indices<'_>,
-    map_ba: Option<Indices<'_>>,
+    map_ab: Bound<'_, PyAny>,
+    map_ba: Option<Bound<'_, PyAny>>,
 ) -> PyResult<Bound<'py, pyo3::types::PyDict>> {
     let (na, nb) = (a.inner.n_vertices(), b.inner.n_vertices());
-    let t_ab = crate::map_between(&map_ab, na, nb)?;
-    let t_ba = map_ba.map(|m| crate::map_between(&m, nb, na)).transpose()?;
+    let t_ab = crate::map_between(&map_ab, na, nb, "map_ab")?;
+    let t_ba = map_ba
+        .map(|m| crate::map_between(&m, nb, na, "map_ba"))
+        .transpose()?;
     let (ma, mb) = (Arc::clone(&a.inner), Arc::clone(&b.inner));
     let (q, orientation) = py
         .detach(move || {
@@ -455,6 +519,7 @@ fn map_quality<'py>(
 /// Adds this module's functions and classes to the extension module.
 pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<RefinedMap>()?;
+    m.add_function(wrap_pyfunction!(_refined_map_from_state, m)?)?;
     m.add_function(wrap_pyfunction!(descriptors, m)?)?;
     m.add_function(wrap_pyfunction!(fit, m)?)?;
     m.add_function(wrap_pyfunction!(fmap_to_map, m)?)?;

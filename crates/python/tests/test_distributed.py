@@ -1,6 +1,7 @@
 """fmaps.distributed on a local two-worker Ray cluster: six generated
 pairs, one worker killed while matching, every pair reported once and
-equal to `fmaps batch`'s map. Skipped, saying so, where Ray is not
+equal to `fmaps batch`'s map; then the same pairs from `Mesh` objects
+instead of paths. Skipped, saying so, where Ray is not
 installed (`.ci/run` installs it)."""
 
 import os
@@ -72,6 +73,12 @@ def test_a_collection_on_two_workers_survives_a_killed_worker(tmp_path):
             on_result=lambda p, v: (seen.append(p), kill_one(p, v)),
             progress=False,
         )
+        # The same collection from Mesh objects (pickled into the tasks).
+        from_meshes = fd.match_collection(
+            pairs,
+            {n: fmaps.Mesh.load(data / f"{n}.off") for n in names},
+            progress=False,
+        )
     finally:
         ray.shutdown()
     assert killed, "no busy worker was found to kill"
@@ -81,3 +88,4 @@ def test_a_collection_on_two_workers_survives_a_killed_worker(tmp_path):
     for a, b in pairs:
         want = fmaps.read_indices(tmp_path / "batch" / f"{a}_{b}.map")
         assert np.array_equal(results[(a, b)]["map_ab"], want), (a, b)
+        assert np.array_equal(from_meshes[(a, b)]["map_ab"], want), (a, b)

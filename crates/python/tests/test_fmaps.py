@@ -118,6 +118,29 @@ def test_a_faust_pair_gives_the_cli_map(tmp_path):
     assert e["mean_error"] < 0.05, e["mean_error"]
 
 
+def test_energy_weights_reach_the_solve_as_in_the_cli(pairs, tmp_path):
+    p = pairs[1]
+    p["a"].save(tmp_path / "a.off")
+    p["b"].save(tmp_path / "b.off")
+    weights = {"w_descr": 1.0, "w_lap": 0.01, "w_dcomm": 0.0, "w_orient": 0.5}
+    flags = [x for k, v in weights.items() for x in ("--" + k.replace("_", "-"), str(v))]
+    out = tmp_path / "ab.map"
+    subprocess.run(
+        [cli(), "match", str(tmp_path / "a.off"), str(tmp_path / "b.off"), "--refine", "none", "--out", str(out), *flags],
+        check=True,
+        capture_output=True,
+    )
+    r = fmaps.match_shapes(p["a"], p["b"], refine="none", **weights)
+    assert np.array_equal(r.map_ab, fmaps.read_indices(out))
+    # Other weights give another C; the defaults are the CLI's.
+    default = fmaps.match_shapes(p["a"], p["b"], refine="none")
+    assert not np.allclose(r.c_ba, default.c_ba)
+    same = fmaps.match_shapes(p["a"], p["b"], refine="none", w_descr=0.1, w_lap=0.001, w_dcomm=1.0, w_orient=1.0)
+    assert np.array_equal(same.c_ba, default.c_ba)
+    with pytest.raises(fmaps.FmapsError, match="weights must be >= 0"):
+        fmaps.match_shapes(p["a"], p["b"], refine="none", w_lap=-1.0)
+
+
 def test_bad_input_raises_with_the_cli_message(tmp_path):
     bad = tmp_path / "bad.off"
     bad.write_text("OFF\n3 1 0\n0 0 0\n1 0 0\n")

@@ -151,10 +151,11 @@ def test_exact_geodesics_on_a_plane_are_euclidean():
         assert np.allclose(row, np.linalg.norm(v - v[s], axis=1), atol=1e-12)
     nearest = fmaps.geodesics(m, src)
     assert np.allclose(nearest, fields.min(axis=0), atol=1e-12)
-    # Indices as a list or int32 convert; floats do not.
+    # Indices as a list, int32 or whole floats convert; fractions do not.
     assert np.array_equal(fmaps.geodesics(m, [0, 77]), nearest)
     assert np.array_equal(fmaps.geodesics(m, src.astype(np.int32)), nearest)
-    with pytest.raises(TypeError):
+    assert np.array_equal(fmaps.geodesics(m, [0.0, 77.0]), nearest)
+    with pytest.raises(fmaps.FmapsError, match="sources: entry 0 is 0.5, not an integer index"):
         fmaps.geodesics(m, [0.5])
     # Dijkstra runs along edges: never shorter.
     assert np.all(fmaps.geodesics(m, src, method="dijkstra") >= nearest - 1e-12)

@@ -1,4 +1,14 @@
-"""Type stubs of the extension module (see the package docstring)."""
+"""Type stubs of the extension module (see the package docstring).
+
+Array arguments (``npt.ArrayLike``) take any array-like -- numpy arrays of
+any layout (read-only, non-contiguous), lists, tuples, objects with
+``__array__`` -- of any dtype that converts without loss, converted once:
+coordinates and features to float64 (from float16/32/64 and integers),
+vertex indices to int64 (from any signed or unsigned integer dtype, or
+floats that are whole numbers). Booleans, complex numbers, strings and
+lossy conversions (uint64 above 2**63 - 1, 64-bit integers float64 cannot
+hold) raise :class:`FmapsError` naming the argument.
+"""
 
 from os import PathLike
 from typing import Optional, Tuple, Union
@@ -15,7 +25,8 @@ class Mesh:
     """A triangle mesh, validated on construction."""
 
     def __init__(self, vertices: npt.ArrayLike, faces: npt.ArrayLike) -> None:
-        """`vertices`: n x 3 float64; `faces`: m x 3 integers, 0-based."""
+        """`vertices`: n x 3 coordinates (float32, float64, integers, lists); `faces`: m x 3 vertex indices,
+        0-based (int32, uint32, int64, ..., lists). Picklable (rebuilt from its arrays)."""
     @staticmethod
     def load(path: Union[str, PathLike]) -> "Mesh":
         """Reads an OFF, OBJ or PLY file (errors name the file and line)."""
@@ -56,7 +67,7 @@ class PreparedShape:
     def input_area(self) -> float: ...
 
 class MatchResult:
-    """The result of :func:`match_shapes`."""
+    """The result of :func:`match_shapes`; picklable."""
 
     map_ab: npt.NDArray[np.int64]
     """For each vertex of A, the vertex of B it goes to (0-based)."""
@@ -90,8 +101,11 @@ def match_shapes(
     k: int = 50,
     k_process: Optional[int] = None,
     schedule: Optional[str] = None,
-    landmarks: Optional[list] = None,
-    w_orient: Optional[float] = None,
+    landmarks: Optional[npt.ArrayLike] = None,
+    w_descr: float = 0.1,
+    w_lap: float = 0.001,
+    w_dcomm: float = 1.0,
+    w_orient: float = 1.0,
     mirrored: bool = False,
     non_isometric: bool = False,
     second_opinion: bool = False,
@@ -108,7 +122,8 @@ def match_shapes(
     as `fmaps match --features learned`);
     adapt: test-time adaptation steps on the pair; point_map: "features" or "spectral" (`fmaps match --point-map`); refine: "default" (Smooth Shells), or a name of `fmaps match --refine`:
     "none", "icp", "zoomout", "bijective-zoomout", "discrete", "bcicp", "smooth-shells"; schedule: "START:FINAL:STEP"
-    for ZoomOut and the discrete presets; landmarks: (vertex of A, vertex of B) pairs, 0-based; starts: further initial sizes ([] = one start; None = the CLI's default);
+    for ZoomOut and the discrete presets; landmarks: (vertex of A, vertex of B) pairs, 0-based (k x 2);
+    w_descr, w_lap, w_dcomm, w_orient: relative weights of the energy's terms (only ratios matter); starts: further initial sizes ([] = one start; None = the CLI's default);
     k_process: eigenpairs computed (None: those the pipeline uses, as the CLI: 200 for Smooth Shells, 150 for ZoomOut);
     non_isometric: the shapes are not near-isometric (different people or animals), as `fmaps match --non-isometric`.
     second_opinion: Smooth Shells runs both settings (default and non-isometric) and keeps the map of least area distortion, as `fmaps match --second-opinion` (twice the time).
@@ -127,8 +142,11 @@ def match_prepared(
     refine: str = "default",
     k: int = 50,
     schedule: Optional[str] = None,
-    landmarks: Optional[list] = None,
-    w_orient: Optional[float] = None,
+    landmarks: Optional[npt.ArrayLike] = None,
+    w_descr: float = 0.1,
+    w_lap: float = 0.001,
+    w_dcomm: float = 1.0,
+    w_orient: float = 1.0,
     mirrored: bool = False,
     non_isometric: bool = False,
     second_opinion: bool = False,
@@ -165,7 +183,7 @@ def train(
     per step run."""
 
 class RefinedMap:
-    """The result of :func:`refine`."""
+    """The result of :func:`refine`; picklable."""
 
     map_ab: npt.NDArray[np.int64]
     """The refined map: for each vertex of A, a vertex of B (0-based)."""
@@ -201,8 +219,11 @@ def fit(
     kind: str = "wks",
     n: int = 100,
     k_descr: int = 128,
-    landmarks: Optional[list] = None,
-    w_orient: Optional[float] = None,
+    landmarks: Optional[npt.ArrayLike] = None,
+    w_descr: float = 0.1,
+    w_lap: float = 0.001,
+    w_dcomm: float = 1.0,
+    w_orient: float = 1.0,
     mirrored: bool = False,
     threads: Optional[int] = None,
 ) -> npt.NDArray[np.float64]:
@@ -270,14 +291,15 @@ def render_transfer(
     a: Mesh,
     b: Mesh,
     map_ab: npt.ArrayLike,
-    path: Union[str, PathLike],
+    path: Optional[Union[str, PathLike]] = None,
     *,
     kind: str = "color",
     up: str = "y",
     yaw: float = 0.0,
     size: int = 480,
-) -> Tuple[int, int]:
-    """Draws the map as a PNG (source left, target right); kind "color" or "texture"."""
+) -> Union[Tuple[int, int], npt.NDArray[np.uint8]]:
+    """Draws the map (source left, target right); kind "color" or "texture". With `path`, writes a PNG and
+    returns (width, height); without, returns the picture (height x width x 3, uint8 RGB)."""
 
 def map_quality(
     a: Mesh, b: Mesh, map_ab: npt.ArrayLike, map_ba: Optional[npt.ArrayLike] = None
