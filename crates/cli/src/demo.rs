@@ -255,5 +255,19 @@ fn pictures(
         })?;
         written.push(p.display().to_string());
     }
+    // The interactive viewer: the map, its error, picking.
+    let per_vertex = fmaps::pictures::vertex_values(a, &case.rows, &o.refined.errors);
+    let page = crate::render_cmd::ViewerPage {
+        title: case.title.clone(),
+        names: ["source".into(), "target".into()],
+        meshes: [a, b],
+        t_ab: &r.t_ab,
+        error: Some((&per_vertex, vmax)),
+        up: view.up,
+    }
+    .html()?;
+    let p = out_dir.join(format!("{}viewer.html", case.prefix));
+    staged.stage(&p, |tmp| Ok(std::fs::write(tmp, page.as_bytes())?))?;
+    written.push(p.display().to_string());
     Ok(())
 }

@@ -86,9 +86,14 @@ position colours; --ply P also writes P-source.ply and P-target.ply with vertex 
         /// Checkerboard squares along the longer side of the picture.
         #[arg(long, default_value_t = 10)]
         squares: usize,
-        /// Output PNG.
-        #[arg(long, default_value = "transfer.png")]
-        out: PathBuf,
+        /// Output PNG (default transfer.png; without --html only).
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// Write the interactive viewer instead (with --out, as well): one
+        /// self-contained HTML page (both shapes turning together, colour
+        /// and texture transfer, click a point on A to see its image on B).
+        #[arg(long, value_name = "FILE.html")]
+        html: Option<PathBuf>,
         /// Also write coloured PLY: PREFIX-source.ply, PREFIX-target.ply.
         #[arg(long, value_name = "PREFIX")]
         ply: Option<PathBuf>,
@@ -114,9 +119,14 @@ nearest covered vertex. With --sym-gt-target the symmetry-aware error is drawn."
         /// Error at the top of the colour scale (larger errors saturate).
         #[arg(long, default_value_t = 0.1)]
         vmax: f64,
-        /// Output PNG.
-        #[arg(long, default_value = "error.png")]
-        out: PathBuf,
+        /// Output PNG (default error.png; without --html only).
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// Write the interactive viewer instead (with --out, as well): one
+        /// self-contained HTML page with the error view, the colour and
+        /// texture transfer and picking.
+        #[arg(long, value_name = "FILE.html")]
+        html: Option<PathBuf>,
         /// Also write the coloured source as PLY.
         #[arg(long)]
         ply: Option<PathBuf>,
@@ -270,19 +280,26 @@ impl RenderCommand {
                 target,
                 map,
                 out,
+                html,
                 ply,
                 ..
             } => {
-                outs.push(out.clone());
+                outs.extend(png_out(out, html, "transfer.png"));
+                outs.extend(html.clone());
                 if let Some(p) = ply {
                     outs.extend(["source", "target"].map(|side| transfer_ply(p, side)));
                 }
                 vec![source, target, map]
             }
             RenderCommand::Error {
-                files, out, ply, ..
+                files,
+                out,
+                html,
+                ply,
+                ..
             } => {
-                outs.push(out.clone());
+                outs.extend(png_out(out, html, "error.png"));
+                outs.extend(html.clone());
                 outs.extend(ply.clone());
                 let mut ins: Vec<&Path> = vec![
                     &files.source,
@@ -352,11 +369,13 @@ pub(crate) fn run(cmd: RenderCommand) -> Result<(), Failure> {
             texture,
             squares,
             out,
+            html,
             ply,
             view,
             json,
         } => {
             let view = view.view()?;
+            let png = png_out(&out, &html, "transfer.png");
             let (a, b) = (load(&source)?, load(&target)?);
             let t_ab = crate::read_indices(&map, b.n_vertices(), false)?;
             if t_ab.len() != a.n_vertices() {
@@ -374,7 +393,13 @@ pub(crate) fn run(cmd: RenderCommand) -> Result<(), Failure> {
                 fmaps::pictures::color_transfer(&a, &b, &t_ab, &view)
             }
             .map_err(runtime)?;
-            save(&img, &out, &mut written)?;
+            if let Some(out) = &png {
+                save(&img, out, &mut written)?;
+            }
+            if let Some(page) = &html {
+                let scene = viewer_page([&source, &target], [&a, &b], &t_ab, None, view.up);
+                save_html(&scene, page, &mut written)?;
+            }
             if let Some(prefix) = ply {
                 for (mesh, colors, side) in [(&a, &cs, "source"), (&b, &ct, "target")] {
                     save_ply(mesh, colors, &transfer_ply(&prefix, side), &mut written)?;
@@ -387,11 +412,13 @@ pub(crate) fn run(cmd: RenderCommand) -> Result<(), Failure> {
             geodesic,
             vmax,
             out,
+            html,
             ply,
             view,
             json,
         } => {
             let view = view.view()?;
+            let png = png_out(&out, &html, "error.png");
             positive("--vmax", vmax)?;
             let EvalInputs {
                 a,
@@ -419,7 +446,19 @@ pub(crate) fn run(cmd: RenderCommand) -> Result<(), Failure> {
             let per_vertex = fmaps::pictures::vertex_values(&a, &gt_source, errors);
             let img =
                 fmaps::pictures::error_map(&a, &per_vertex, vmax, title, &view).map_err(runtime)?;
-            save(&img, &out, &mut written)?;
+            if let Some(out) = &png {
+                save(&img, out, &mut written)?;
+            }
+            if let Some(page) = &html {
+                let scene = viewer_page(
+                    [&files.source, &files.target],
+                    [&a, &b],
+                    &t_ab,
+                    Some((&per_vertex, vmax)),
+                    view.up,
+                );
+                save_html(&scene, page, &mut written)?;
+            }
             if let Some(p) = ply {
                 save_ply(
                     &a,
@@ -645,6 +684,82 @@ fn positive(flag: &str, x: f64) -> Result<(), Failure> {
         Ok(())
     } else {
         Err(input(anyhow::anyhow!("{flag} {x}: must be positive")))
+    }
+}
+
+/// The PNG a picture command writes: `--out`, or without `--html` the
+/// default name.
+fn png_out(out: &Option<PathBuf>, html: &Option<PathBuf>, default: &str) -> Option<PathBuf> {
+    match (out, html) {
+        (Some(o), _) => Some(o.clone()),
+        (None, None) => Some(PathBuf::from(default)),
+        (None, Some(_)) => None,
+    }
+}
+
+/// What [`save_html`] writes: the meshes, the map and their names.
+pub(crate) struct ViewerPage<'a> {
+    pub(crate) title: String,
+    pub(crate) names: [String; 2],
+    pub(crate) meshes: [&'a TriMesh; 2],
+    pub(crate) t_ab: &'a [usize],
+    pub(crate) error: Option<(&'a [f64], f64)>,
+    pub(crate) up: Axis,
+}
+
+/// The viewer page of a map between the meshes of two files (named by
+/// their file names).
+pub(crate) fn viewer_page<'a>(
+    files: [&Path; 2],
+    meshes: [&'a TriMesh; 2],
+    t_ab: &'a [usize],
+    error: Option<(&'a [f64], f64)>,
+    up: Axis,
+) -> ViewerPage<'a> {
+    let names = files.map(|p| {
+        p.file_name().map_or_else(
+            || p.display().to_string(),
+            |n| n.to_string_lossy().into_owned(),
+        )
+    });
+    ViewerPage {
+        title: format!("{} \u{2192} {}", names[0], names[1]),
+        names,
+        meshes,
+        t_ab,
+        error,
+        up,
+    }
+}
+
+/// Writes the interactive viewer page (staged with the other outputs).
+fn save_html(page: &ViewerPage<'_>, path: &Path, written: &mut Written) -> Result<(), Failure> {
+    let text = page.html()?;
+    written
+        .staged
+        .stage(path, |tmp| Ok(std::fs::write(tmp, text.as_bytes())?))?;
+    written.names.push(path.display().to_string());
+    Ok(())
+}
+
+impl ViewerPage<'_> {
+    /// The page's HTML.
+    pub(crate) fn html(&self) -> Result<String, Failure> {
+        use fmaps::viz::html::{Scene, Surface, viewer_html};
+        let surface = |i: usize| Surface {
+            name: &self.names[i],
+            vertices: self.meshes[i].vertices(),
+            faces: self.meshes[i].faces(),
+        };
+        viewer_html(&Scene {
+            title: &self.title,
+            a: surface(0),
+            b: surface(1),
+            map_ab: self.t_ab,
+            error: self.error,
+            up: self.up,
+        })
+        .map_err(runtime)
     }
 }
 

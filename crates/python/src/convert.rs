@@ -174,6 +174,14 @@ pub(crate) fn floats2<'py>(
     Ok(convert(obj, name, Target::Float, 2)?.extract()?)
 }
 
+/// A vector of numbers as float64.
+pub(crate) fn floats1<'py>(
+    obj: &Bound<'py, PyAny>,
+    name: &str,
+) -> PyResult<PyReadonlyArray1<'py, f64>> {
+    Ok(convert(obj, name, Target::Float, 1)?.extract()?)
+}
+
 /// A vector of indices as int64.
 pub(crate) fn ints1<'py>(
     obj: &Bound<'py, PyAny>,

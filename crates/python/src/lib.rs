@@ -23,6 +23,7 @@
 #![deny(unsafe_code)]
 
 mod convert;
+mod display;
 mod learned;
 mod stages;
 
@@ -192,6 +193,16 @@ impl Mesh {
         Ok(d)
     }
 
+    /// The notebook's display: the interactive viewer (turn, zoom, pick).
+    fn _repr_html_(&self) -> PyResult<String> {
+        Ok(display::iframe(&display::mesh_page(&self.inner)?))
+    }
+
+    /// The display without scripts: a picture coloured by position.
+    fn _repr_png_<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, pyo3::types::PyBytes>> {
+        display::mesh_png(py, &self.inner)
+    }
+
     fn __repr__(&self) -> String {
         format!(
             "Mesh({} vertices, {} faces)",
@@ -342,6 +353,9 @@ struct MatchResult {
     /// Seconds of each refinement step (Smooth Shells: rigid alignment,
     /// initialisation, then its levels).
     seconds_per_iteration: Vec<f64>,
+    /// The meshes matched (A, B; the prepared, unit-area ones after
+    /// `match_prepared`), which the notebook display draws.
+    meshes: (Py<Mesh>, Py<Mesh>),
 }
 
 /// A pickled [`MatchResult`]'s fields, in declaration order.
@@ -355,6 +369,7 @@ type MatchResultState = (
     Py<PyDict>,
     String,
     Vec<f64>,
+    (Py<Mesh>, Py<Mesh>),
 );
 
 #[pymethods]
@@ -364,6 +379,27 @@ impl MatchResult {
             "MatchResult(refiner={:?}, orientation={:.3})",
             self.refiner, self.orientation
         )
+    }
+
+    /// The notebook's display: the map in the interactive viewer (colour
+    /// and texture transfer, picking).
+    fn _repr_html_(&self, py: Python<'_>) -> PyResult<String> {
+        let (a, b, t_ab) = self.parts(py)?;
+        let title = format!("map A \u{2192} B ({})", self.refiner_label());
+        Ok(display::iframe(&display::map_page(
+            &title,
+            &a,
+            &b,
+            &t_ab,
+            None,
+            fmaps::viz::Axis::Y,
+        )?))
+    }
+
+    /// The display without scripts: the colour transfer as a picture.
+    fn _repr_png_<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, pyo3::types::PyBytes>> {
+        let (a, b, t_ab) = self.parts(py)?;
+        display::map_png(py, &a, &b, &t_ab)
     }
 
     /// Pickling: the fields (numpy arrays, dicts, numbers).
@@ -381,6 +417,7 @@ impl MatchResult {
             self.quality.clone_ref(py),
             self.refiner.clone(),
             self.seconds_per_iteration.clone(),
+            (self.meshes.0.clone_ref(py), self.meshes.1.clone_ref(py)),
         );
         Ok((
             py.import("fmaps._fmaps")?
@@ -390,11 +427,44 @@ impl MatchResult {
     }
 }
 
+impl MatchResult {
+    /// The two meshes and the map.
+    fn parts(&self, py: Python<'_>) -> PyResult<(Arc<TriMesh>, Arc<TriMesh>, Vec<usize>)> {
+        let a = Arc::clone(&self.meshes.0.get().inner);
+        let b = Arc::clone(&self.meshes.1.get().inner);
+        let t_ab = map_between(
+            self.map_ab.bind(py).as_any(),
+            a.n_vertices(),
+            b.n_vertices(),
+            "map_ab",
+        )?;
+        Ok((a, b, t_ab))
+    }
+
+    fn refiner_label(&self) -> &str {
+        if self.refiner.is_empty() {
+            "initial map"
+        } else {
+            &self.refiner
+        }
+    }
+}
+
 /// Rebuilds a [`MatchResult`] from its pickled fields.
 #[pyfunction]
 fn _match_result_from_state(state: MatchResultState) -> MatchResult {
-    let (map_ab, map_ab_init, c_ba, orientation, confidence, times, quality, refiner, seconds) =
-        state;
+    let (
+        map_ab,
+        map_ab_init,
+        c_ba,
+        orientation,
+        confidence,
+        times,
+        quality,
+        refiner,
+        seconds,
+        meshes,
+    ) = state;
     MatchResult {
         map_ab,
         map_ab_init,
@@ -405,6 +475,7 @@ fn _match_result_from_state(state: MatchResultState) -> MatchResult {
         quality,
         refiner,
         seconds_per_iteration: seconds,
+        meshes,
     }
 }
 
@@ -424,8 +495,8 @@ fn indices(py: Python<'_>, v: &[usize]) -> Py<PyArray1<i64>> {
 #[allow(clippy::too_many_arguments)]
 fn match_shapes(
     py: Python<'_>,
-    a: &Mesh,
-    b: &Mesh,
+    a: &Bound<'_, Mesh>,
+    b: &Bound<'_, Mesh>,
     refine: &str,
     k: usize,
     k_process: Option<usize>,
@@ -446,7 +517,7 @@ fn match_shapes(
     point_map: Option<String>,
     threads: Option<usize>,
 ) -> PyResult<MatchResult> {
-    let (ma, mb) = (Arc::clone(&a.inner), Arc::clone(&b.inner));
+    let (ma, mb) = (Arc::clone(&a.get().inner), Arc::clone(&b.get().inner));
     let landmarks = stages::landmark_pairs(landmarks, ma.n_vertices(), mb.n_vertices())?;
     let sizes = (ma.n_vertices(), mb.n_vertices());
     let learned = learned::learned_of(features, model, adapt, point_map.as_deref())?;
@@ -485,7 +556,7 @@ fn match_shapes(
         Ok::<_, String>((r, q))
     })?
     .map_err(err)?;
-    result(py, r, quality)
+    result(py, r, quality, (a.clone().unbind(), b.clone().unbind()))
 }
 
 /// The refiner's name and the seconds of each of its steps ("" and none
@@ -521,6 +592,7 @@ fn result(
     py: Python<'_>,
     r: fmaps::MatchResult,
     quality: fmaps::eval::MapQuality,
+    meshes: (Py<Mesh>, Py<Mesh>),
 ) -> PyResult<MatchResult> {
     let times = PyDict::new(py);
     let t = r.times;
@@ -562,6 +634,7 @@ fn result(
         quality: q.unbind(),
         refiner,
         seconds_per_iteration,
+        meshes,
     })
 }
 
@@ -819,7 +892,8 @@ fn match_prepared(
         Ok::<_, String>((r, q))
     })?
     .map_err(err)?;
-    result(py, r, quality)
+    let meshes = (Py::new(py, a.mesh()?)?, Py::new(py, b.mesh()?)?);
+    result(py, r, quality, meshes)
 }
 
 /// Shape `pose` (0 rest, 1 walking, 2 crouching, 3 reaching) of individual
@@ -1002,23 +1076,14 @@ fn render_transfer<'py>(
     yaw: f64,
     size: usize,
 ) -> PyResult<Bound<'py, PyAny>> {
-    use fmaps::viz::{Axis, View};
+    use fmaps::viz::View;
     let t_ab = map_between(
         &map_ab,
         a.inner.n_vertices(),
         b.inner.n_vertices(),
         "map_ab",
     )?;
-    let axis = match up {
-        "x" => Axis::X,
-        "y" => Axis::Y,
-        "z" => Axis::Z,
-        other => {
-            return Err(err(format!(
-                "up = {other:?}: expected \"x\", \"y\" or \"z\""
-            )));
-        }
-    };
+    let axis = display::axis(up)?;
     if !(16..=8192).contains(&size) {
         return Err(err(format!("size = {size}: use 16..=8192 pixels")));
     }
@@ -1076,6 +1141,7 @@ fn _fmaps(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(_match_result_from_state, m)?)?;
     m.add_function(wrap_pyfunction!(generated_body, m)?)?;
     m.add_function(wrap_pyfunction!(render_transfer, m)?)?;
+    m.add_function(wrap_pyfunction!(display::viewer_html_py, m)?)?;
     m.add_function(wrap_pyfunction!(spectrum, m)?)?;
     m.add_function(wrap_pyfunction!(match_shapes, m)?)?;
     m.add_function(wrap_pyfunction!(learned::train, m)?)?;

@@ -171,3 +171,33 @@ def test_a_picture_comes_back_as_an_array_without_a_path(pair, tmp_path):
     assert img.shape == (h, w, 3) and img.dtype == np.uint8
     # Not blank: the shapes' colours differ from the background.
     assert len(np.unique(img.reshape(-1, 3), axis=0)) > 10
+
+
+def test_meshes_and_results_display_themselves_in_a_notebook(pair, tmp_path):
+    a, b = pair
+    r = fmaps.match_shapes(a, b, refine="zoomout", threads=1)
+    for obj in (a, r):
+        html = obj._repr_html_()
+        # The viewer page in an iframe of its own, everything inline.
+        assert html.startswith('<iframe srcdoc="&lt;!DOCTYPE html&gt;')
+        assert "fmaps-data" in html and "http://" not in html and "https://" not in html
+        assert obj._repr_png_()[:8] == b"\x89PNG\r\n\x1a\n"
+    # The result keeps the meshes it matched, also through pickle.
+    assert np.array_equal(r.meshes[0].vertices, a.vertices)
+    assert pickle.loads(pickle.dumps(r))._repr_html_() == r._repr_html_()
+
+
+def test_the_viewer_page_is_written_and_checks_its_input(pair, tmp_path):
+    a, b = pair
+    m = fmaps.match_shapes(a, b, refine="none", threads=1).map_ab
+    err = np.linspace(0, 0.2, a.n_vertices).astype(np.float32)
+    page = fmaps.viewer_html(a, b, m, error=err, path=tmp_path / "v.html", title="t <x>")
+    assert (tmp_path / "v.html").read_text() == page
+    assert "<title>t &lt;x&gt;</title>" in page and '"error_max": 0.1' in page
+    assert '"b": null' in fmaps.viewer_html(a)
+    with pytest.raises(fmaps.FmapsError, match="give both b and map_ab"):
+        fmaps.viewer_html(a, b)
+    with pytest.raises(fmaps.FmapsError, match="error has 3 entries"):
+        fmaps.viewer_html(a, b, m, error=[0.0, 1.0, 2.0])
+    with pytest.raises(fmaps.FmapsError, match="^map_ab: entry 0 is"):
+        fmaps.viewer_html(a, b, np.full(a.n_vertices, b.n_vertices))

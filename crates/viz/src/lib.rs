@@ -28,6 +28,7 @@
 #![forbid(unsafe_code)]
 
 mod color;
+pub mod html;
 mod image;
 pub mod plot;
 mod render;

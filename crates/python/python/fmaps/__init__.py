@@ -49,6 +49,7 @@ from ._fmaps import (
     render_transfer,
     spectrum,
     train,
+    viewer_html,
 )
 
 __all__ = [
@@ -75,4 +76,5 @@ __all__ = [
     "render_transfer",
     "spectrum",
     "train",
+    "viewer_html",
 ]

@@ -43,6 +43,10 @@ class Mesh:
         """The validation report of `fmaps info`: counts, defects (0-based elements), boundary, components, genus."""
     def save(self, path: Union[str, PathLike]) -> None:
         """Writes .off, .obj or .ply (from the extension), atomically."""
+    def _repr_html_(self) -> str:
+        """The notebook display: the interactive viewer in an iframe."""
+    def _repr_png_(self) -> bytes:
+        """The display without scripts: a picture coloured by position."""
 
 class PreparedShape:
     """A shape after the per-shape stages (unit area, Laplacian, eigenbasis); picklable."""
@@ -87,6 +91,12 @@ class MatchResult:
     """The refiner's name ("" without refinement)."""
     seconds_per_iteration: list
     """Seconds of each refinement step."""
+    meshes: Tuple[Mesh, Mesh]
+    """The meshes matched (A, B; the prepared, unit-area ones after match_prepared)."""
+    def _repr_html_(self) -> str:
+        """The notebook display: the map in the interactive viewer (transfer, picking)."""
+    def _repr_png_(self) -> bytes:
+        """The display without scripts: the colour transfer as a picture."""
 
 def spectrum(
     mesh: Mesh, k: int = 200, threads: Optional[int] = None
@@ -306,3 +316,18 @@ def map_quality(
 ) -> dict:
     """Scores without ground truth: coverage, area_coverage, collapsed_faces, area_distortion, conformal_distortion,
     orientation (1 preserved, -1 mirrored), and with map_ba round_trip."""
+
+def viewer_html(
+    a: Mesh,
+    b: Optional[Mesh] = None,
+    map_ab: Optional[npt.ArrayLike] = None,
+    *,
+    error: Optional[npt.ArrayLike] = None,
+    error_max: float = 0.1,
+    up: str = "y",
+    title: Optional[str] = None,
+    path: Optional[Union[str, PathLike]] = None,
+) -> str:
+    """The interactive viewer as one self-contained HTML page (no network at view time): A and B side by side,
+    turning together, colour and texture transfer, `error` per vertex of A (NaN: none), picking (click a point on
+    A, see its image on B); `a` alone without b and map_ab. Returns the page; with `path`, also writes it."""
