@@ -42,6 +42,10 @@ pub(crate) struct BatchArgs {
     /// Geodesics of the errors.
     #[arg(long, value_enum, default_value_t = GeodesicMethod::Exact)]
     geodesic: GeodesicMethod,
+    /// Print the summary as one JSON object on stdout (pairs, matched,
+    /// cached, failed, busy, seconds, report).
+    #[arg(long)]
+    json: bool,
     /// Options of `fmaps match` for every pair, after `--`
     /// (e.g. `-- --refine zoomout -k 30`).
     #[arg(last = true)]
@@ -282,7 +286,10 @@ pub(crate) fn batch(args: &BatchArgs) -> Result<(), Failure> {
     // The exit code of the failures: 2 if any pair had bad input, else 1.
     let mut code = 1;
     let mut busy = 0usize;
+    let t0 = Instant::now();
+    let progress = Progress::new(mine.len());
     for p in &mine {
+        progress.show(done, skipped, failed, t0.elapsed().as_secs_f64());
         let stem = format!("{}_{}", p.a, p.b);
         if args.out.join(format!("{stem}.json")).is_file() {
             skipped += 1;
@@ -303,23 +310,34 @@ pub(crate) fn batch(args: &BatchArgs) -> Result<(), Failure> {
             Err(Failure(c, e)) => {
                 failed += 1;
                 code = code.max(c);
-                eprintln!("error: {stem} (line {}): {e:#}", p.line);
+                progress.println(&format!("error: {stem} (line {}): {e:#}", p.line));
             }
         }
     }
+    drop(progress);
     write_report(args, &all)?;
     let elsewhere = if busy > 0 {
         format!(" ({busy} left to another batch on this folder)")
     } else {
         String::new()
     };
+    let seconds = t0.elapsed().as_secs_f64();
+    let report = args.out.join("report.jsonl");
     eprintln!(
-        "{} pairs in this shard ({}/{}): {done} matched, {skipped} already done, {failed} failed{elsewhere}; report: {}",
+        "{} pairs in this shard ({}/{}): {done} matched, {skipped} already done, {failed} failed{elsewhere} in {seconds:.1} s; report: {}",
         mine.len(),
         shard + 1,
         shards,
-        args.out.join("report.jsonl").display()
+        report.display()
     );
+    if args.json {
+        let summary = json!({
+            "pairs": mine.len(), "shard": [shard + 1, shards], "matched": done,
+            "cached": skipped, "failed": failed, "busy": busy, "seconds": seconds,
+            "report": report.display().to_string(),
+        });
+        emit(&format!("{summary}\n"))?;
+    }
     if failed > 0 {
         return Err(Failure(
             code,
@@ -479,4 +497,76 @@ fn write_report(args: &BatchArgs, all: &[Pair]) -> Result<(), Failure> {
     let path = args.out.join("report.jsonl");
     fmaps::mesh_io::atomic::write_atomically(&path, |w| w.write_all(text.as_bytes()))
         .map_err(|e| runtime(anyhow::anyhow!("{}: {e}", path.display())))
+}
+
+/// The progress of a batch on a terminal: a bar counting the pairs done
+/// (matched, cached, failed) with the time left, estimated from the pairs
+/// matched in this run (cached ones take no time). Not drawn when stderr
+/// is not a terminal (a log, a pipe): the summary line says it all there.
+struct Progress(indicatif::ProgressBar);
+
+impl Progress {
+    fn new(pairs: usize) -> Progress {
+        let bar = indicatif::ProgressBar::new(pairs as u64);
+        if let Ok(style) =
+            indicatif::ProgressStyle::with_template("{bar:30} {pos}/{len} pairs  {msg}")
+        {
+            bar.set_style(style.progress_chars("=> "));
+        }
+        Progress(bar)
+    }
+
+    /// Before the next pair: counts and the estimate of the time left.
+    fn show(&self, matched: usize, cached: usize, failed: usize, elapsed: f64) {
+        let finished = matched + cached + failed;
+        let worked = matched + failed;
+        let left = self.0.length().unwrap_or(0) as usize
+            - finished.min(self.0.length().unwrap_or(0) as usize);
+        let eta = if worked > 0 {
+            format!(
+                ", about {} left",
+                duration(elapsed / worked as f64 * left as f64)
+            )
+        } else {
+            String::new()
+        };
+        self.0.set_position(finished as u64);
+        self.0.set_message(format!(
+            "{matched} matched, {cached} cached, {failed} failed; {} elapsed{eta}",
+            duration(elapsed)
+        ));
+    }
+
+    /// A line above the bar.
+    fn println(&self, line: &str) {
+        self.0.suspend(|| eprintln!("{line}"));
+    }
+}
+
+impl Drop for Progress {
+    fn drop(&mut self) {
+        self.0.finish_and_clear();
+    }
+}
+
+/// Seconds as `1h02m`, `3m05s` or `42s`.
+fn duration(seconds: f64) -> String {
+    let s = seconds.max(0.0).round() as u64;
+    if s >= 3600 {
+        format!("{}h{:02}m", s / 3600, s % 3600 / 60)
+    } else if s >= 60 {
+        format!("{}m{:02}s", s / 60, s % 60)
+    } else {
+        format!("{s}s")
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn durations_read_as_hours_minutes_seconds() {
+        assert_eq!(super::duration(42.4), "42s");
+        assert_eq!(super::duration(185.0), "3m05s");
+        assert_eq!(super::duration(3720.0), "1h02m");
+    }
 }

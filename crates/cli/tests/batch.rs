@@ -89,8 +89,33 @@ fn batch_matches_every_pair_once_resumes_and_shards() {
     // the same map.
     let before = read(out.join("rest_big.map"));
     std::fs::remove_file(out.join("rest_big.json")).unwrap();
-    let log = batch(&out, &[]);
+    let o = fmaps()
+        .args(["--threads", "2", "batch", &s(&pairs), "--data", &s(&data)])
+        .args(["--out", &s(&out), "--json"])
+        .args(opts)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let log = String::from_utf8_lossy(&o.stderr);
     assert!(log.contains("1 matched, 2 already done"), "{log}");
+    // Not a terminal: no progress bar, the one summary line.
+    assert_eq!(log.lines().count(), 1, "{log}");
+    // --json: the same summary on stdout.
+    let summary: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(
+        (
+            &summary["pairs"],
+            &summary["matched"],
+            &summary["cached"],
+            &summary["failed"]
+        ),
+        (
+            &serde_json::json!(3),
+            &serde_json::json!(1),
+            &serde_json::json!(2),
+            &serde_json::json!(0)
+        )
+    );
     assert_eq!(read(out.join("rest_big.map")), before);
     let again = std::fs::read_to_string(out.join("rest_big.json")).unwrap();
     assert!(
