@@ -254,6 +254,11 @@ pub(crate) fn batch(args: &BatchArgs) -> Result<(), Failure> {
     )
     .map_err(|e| input(anyhow::anyhow!("match options after --: {e}")))?;
     let m = parsed.args;
+    if m.descr_files.descr_source.is_some() {
+        return Err(input(anyhow::anyhow!(
+            "match options after --: --descr-source and --descr-target are one pair's descriptors (use fmaps match for each pair)"
+        )));
+    }
     if m.out.is_some() || m.save_fmap.is_some() || m.json {
         return Err(input(anyhow::anyhow!(
             "match options after --: --out, --save-fmap and --json are batch's own (A_B.map and A_B.json in --out)"

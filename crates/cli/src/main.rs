@@ -14,6 +14,7 @@ use serde_json::json;
 
 mod batch;
 mod demo;
+mod descr_files;
 mod eval;
 mod geodesic;
 mod info;
@@ -445,7 +446,7 @@ pub(crate) struct EvalFiles {
     /// Target mesh B.
     #[arg(long)]
     target: PathBuf,
-    /// The map A -> B (.map, 1-based).
+    /// The map A -> B (.map, 1-based; .npy/.npz, 0-based).
     #[arg(long)]
     map: PathBuf,
     /// Ground truth on A (.vts, 1-based).
@@ -514,6 +515,17 @@ impl EvalFiles {
 
 /// A `.vts` or `.map` file (1-based) as 0-based indices below `n`.
 fn read_indices(p: &Path, n: usize, vts: bool) -> Result<Vec<usize>, Failure> {
+    if mesh_io::arrays::is_numpy(p) {
+        // NumPy files hold 0-based indices.
+        let v = mesh_io::arrays::read_indices(p).map_err(input)?;
+        if let Some((i, &x)) = v.iter().enumerate().find(|(_, x)| **x >= n) {
+            return Err(input(anyhow::anyhow!(
+                "{}: entry {i} is {x}, outside 0..{n} (0-based vertex indices; the mesh has {n} vertices)",
+                p.display()
+            )));
+        }
+        return Ok(v);
+    }
     let v = if vts {
         mesh_io::read_vts(p)
     } else {

@@ -18,8 +18,8 @@ pub(crate) struct MatchArgs {
     source: PathBuf,
     /// Target mesh B.
     target: PathBuf,
-    /// Output map T: A -> B, one 1-based B vertex per A vertex (the
-    /// dataset's .map format).
+    /// Output map T: A -> B, one B vertex per A vertex: 1-based text (the
+    /// datasets' .map format), or 0-based int64 in FILE.npy / FILE.npz.
     #[arg(long)]
     pub(crate) out: Option<PathBuf>,
     /// Size of the functional map (k x k).
@@ -43,6 +43,8 @@ pub(crate) struct MatchArgs {
     landmarks: Option<PathBuf>,
     #[command(flatten)]
     weights: crate::weights::WeightFlags,
+    #[command(flatten)]
+    pub(crate) descr_files: crate::descr_files::DescriptorFiles,
     /// Refinement of the initial map. Default: smooth-shells (the most
     /// accurate here, near-isometric and non-isometric; docs/benchmarks.md),
     /// or zoomout when only --zoomout is given; `none` keeps the initial
@@ -125,7 +127,8 @@ pub(crate) struct MatchArgs {
     #[arg(long)]
     no_area_normalize: bool,
     /// Write C_BA (k x k, functions on B to functions on A, between the
-    /// bases of the unit-area shapes unless --no-area-normalize) as text.
+    /// bases of the unit-area shapes unless --no-area-normalize) as text,
+    /// or float64 in FILE.npy / FILE.npz.
     #[arg(long)]
     pub(crate) save_fmap: Option<PathBuf>,
     /// Print one JSON object (stage times, map metrics, energy).
@@ -311,6 +314,7 @@ pub(crate) fn params_of(args: &MatchArgs, sizes: (usize, usize)) -> Result<Match
     if let Some(p) = &args.landmarks {
         d.landmarks = read_landmarks(p)?.pairs;
     }
+    d.given = args.descr_files.load(sizes)?;
     params.energy.weights = args.weights.weights();
     params.energy.orient_reversing = args.mirrored;
     params.adjoint = args.refiner.adjoint;
@@ -431,7 +435,9 @@ pub(crate) fn match_cmd(args: &MatchArgs) -> Result<(), Failure> {
         .flatten()
         .map(PathBuf::as_path)
         .collect();
-    crate::outputs::check_outputs(&[&args.source, &args.target], &outs)?;
+    let mut ins: Vec<&Path> = vec![&args.source, &args.target];
+    ins.extend(args.descr_files.paths());
+    crate::outputs::check_outputs(&ins, &outs)?;
     let t = Instant::now();
     let a = load(&args.source)?;
     let b = load(&args.target)?;

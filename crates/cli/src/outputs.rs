@@ -158,19 +158,34 @@ impl Staged {
 }
 
 /// The outputs of `match` and `refine`, written together: the point map
-/// (`.map`, 1-based) and C as text (one row per line, 17 significant
-/// digits).
+/// (`.map`, 1-based; `.npy`/`.npz`: int64, 0-based) and C as text (one row
+/// per line, 17 significant digits; `.npy`/`.npz`: float64).
 pub(crate) fn write_map_outputs(
     out: Option<&Path>,
     save_fmap: Option<&Path>,
     t_ab: &[usize],
     c: &nalgebra::DMatrix<f64>,
 ) -> Result<(), Failure> {
+    use mesh_io::arrays::{Container, write_indices, write_matrix};
     let mut staged = Staged::default();
     if let Some(out) = out {
-        staged.stage(out, |tmp| Ok(mesh_io::write_map(tmp, t_ab)?))?;
+        if let Some(container) = Container::of(out) {
+            staged.stage(out, |tmp| Ok(write_indices(tmp, t_ab, container)?))?;
+        } else {
+            staged.stage(out, |tmp| Ok(mesh_io::write_map(tmp, t_ab)?))?;
+        }
     }
-    if let Some(path) = save_fmap {
+    if let Some((path, container)) = save_fmap.and_then(|p| Some((p, Container::of(p)?))) {
+        staged.stage(path, |tmp| {
+            Ok(write_matrix(
+                tmp,
+                c.nrows(),
+                c.ncols(),
+                c.as_slice(),
+                container,
+            )?)
+        })?;
+    } else if let Some(path) = save_fmap {
         let mut text = String::new();
         for row in c.row_iter() {
             let cells: Vec<String> = row.iter().map(|v| format!("{v:.17e}")).collect();

@@ -14,8 +14,9 @@ pub(crate) struct RefineArgs {
     source: PathBuf,
     /// Target mesh B.
     target: PathBuf,
-    /// The map to refine, A -> B: one 1-based B vertex per A vertex (.map),
-    /// from any tool.
+    /// The map to refine, A -> B, from any tool: one B vertex per A vertex,
+    /// 1-based text (.map), or 0-based integers in a NumPy file (.npy,
+    /// .npz; any integer dtype).
     #[arg(long)]
     init_map: PathBuf,
     /// The refinement.
@@ -30,10 +31,10 @@ pub(crate) struct RefineArgs {
     /// Keep the meshes' own units (no scaling to unit area).
     #[arg(long)]
     no_area_normalize: bool,
-    /// Output map T: A -> B (.map, 1-based).
+    /// Output map T: A -> B (.map, 1-based; .npy/.npz, 0-based int64).
     #[arg(long)]
     out: Option<PathBuf>,
-    /// Write the refined C_BA as text.
+    /// Write the refined C_BA as text (or float64 .npy/.npz).
     #[arg(long)]
     save_fmap: Option<PathBuf>,
     /// Print one JSON object.

@@ -77,7 +77,8 @@ position colours; --ply P also writes P-source.ply and P-target.ply with vertex 
         source: PathBuf,
         /// Target mesh B.
         target: PathBuf,
-        /// The map A -> B (.map: one 1-based B vertex per A vertex).
+        /// The map A -> B (.map: one 1-based B vertex per A vertex;
+        /// .npy/.npz: 0-based).
         #[arg(long)]
         map: PathBuf,
         /// A checkerboard texture instead of position colours.
@@ -216,7 +217,8 @@ fmaps render scalar tr_reg_000.off --values dist.txt --title distance --out dist
     Scalar {
         /// Mesh file.
         mesh: PathBuf,
-        /// Values, one per vertex and line (`inf`/`nan` are drawn grey).
+        /// Values, one per vertex and line (`inf`/`nan` are drawn grey), or
+        /// a NumPy vector (.npy/.npz).
         #[arg(long)]
         values: PathBuf,
         /// Bottom of the colour scale (default: the smallest finite value).
@@ -789,8 +791,13 @@ fn read_text(path: &Path) -> Result<String, Failure> {
         .map_err(|_| input(anyhow::anyhow!("{}: not valid UTF-8 text", path.display())))
 }
 
-/// A dense matrix, one row per non-empty line.
-fn read_matrix(path: &Path) -> Result<nalgebra::DMatrix<f64>, Failure> {
+/// A dense matrix: a NumPy file (.npy, .npz with one array; any real or
+/// integer dtype), or text with one row per non-empty line.
+pub(crate) fn read_matrix(path: &Path) -> Result<nalgebra::DMatrix<f64>, Failure> {
+    if fmaps::mesh_io::arrays::is_numpy(path) {
+        let (r, c, v) = fmaps::mesh_io::arrays::read_matrix(path).map_err(input)?;
+        return Ok(nalgebra::DMatrix::from_vec(r, c, v));
+    }
     let text = read_text(path)?;
     let mut rows: Vec<Vec<f64>> = Vec::new();
     for (i, line) in text.lines().enumerate() {
@@ -861,6 +868,22 @@ fn read_curve(path: &Path) -> Result<(Vec<f64>, Vec<f64>, f64), Failure> {
 
 /// One value per vertex.
 fn read_values(path: &Path, n: usize) -> Result<Vec<f64>, Failure> {
+    use fmaps::mesh_io::arrays;
+    if arrays::is_numpy(path) {
+        // NaN and infinities allowed: drawn grey, as in text.
+        let a = arrays::read_numeric(path).map_err(input)?;
+        if !matches!(a.shape.as_slice(), [m] | [m, 1] if *m == n) {
+            return Err(input(anyhow::anyhow!(
+                "{}: shape {:?}, but the mesh has {n} vertices (one value per vertex)",
+                path.display(),
+                a.shape
+            )));
+        }
+        return Ok(match a.values {
+            arrays::Values::Float(v) => v,
+            arrays::Values::Int(v) => v.into_iter().map(|x| x as f64).collect(),
+        });
+    }
     let text = read_text(path)?;
     let mut v = Vec::with_capacity(n);
     for (i, line) in text.lines().enumerate() {

@@ -154,29 +154,64 @@ pub(crate) fn spectrum(
         }
     }
     if let Some(out) = out {
-        outln!(o, "wrote {} (+ _eigenvalues.npy, _mass.npy)", out.display());
+        if is_npz(out) {
+            outln!(
+                o,
+                "wrote {} (eigenvectors, eigenvalues, mass)",
+                out.display()
+            );
+        } else {
+            outln!(o, "wrote {} (+ _eigenvalues.npy, _mass.npy)", out.display());
+        }
     }
     emit(&o)
 }
 
-/// FILE.npy: eigenvectors; FILE_eigenvalues.npy; FILE_mass.npy.
-/// The three files of `--out FILE.npy`: FILE.npy (eigenvectors),
-/// FILE_eigenvalues.npy, FILE_mass.npy.
-fn basis_files(out: &Path) -> [PathBuf; 3] {
+/// The files of `--out`: FILE.npz alone (one archive with the arrays
+/// `eigenvectors`, `eigenvalues`, `mass`), or for FILE.npy three files:
+/// FILE.npy (eigenvectors), FILE_eigenvalues.npy, FILE_mass.npy.
+fn basis_files(out: &Path) -> Vec<PathBuf> {
+    if is_npz(out) {
+        return vec![out.to_path_buf()];
+    }
     let stem = out.with_extension("");
     let sibling = |suffix: &str| PathBuf::from(format!("{}_{suffix}.npy", stem.display()));
-    [out.to_path_buf(), sibling("eigenvalues"), sibling("mass")]
+    vec![out.to_path_buf(), sibling("eigenvalues"), sibling("mass")]
 }
 
-/// The basis as three `.npy` files ([`basis_files`]), written together.
-fn write_basis(files: &[PathBuf; 3], b: &fmaps::eigensolve::SpectralBasis) -> Result<(), Failure> {
+fn is_npz(p: &Path) -> bool {
+    p.extension().is_some_and(|e| e.eq_ignore_ascii_case("npz"))
+}
+
+/// The basis as the files of [`basis_files`], written together.
+fn write_basis(files: &[PathBuf], b: &fmaps::eigensolve::SpectralBasis) -> Result<(), Failure> {
     let mut staged = crate::outputs::Staged::default();
-    let arrays: [(&[usize], &[f64]); 3] = [
-        (&[b.n(), b.k()], b.eigenvectors.as_slice()),
-        (&[b.k()], b.eigenvalues.as_slice()),
-        (&[b.n()], b.mass.as_slice()),
+    let arrays: [(&str, &[usize], &[f64]); 3] = [
+        ("eigenvectors", &[b.n(), b.k()], b.eigenvectors.as_slice()),
+        ("eigenvalues", &[b.k()], b.eigenvalues.as_slice()),
+        ("mass", &[b.n()], b.mass.as_slice()),
     ];
-    for (path, (shape, data)) in files.iter().zip(arrays) {
+    if let [one] = files
+        && is_npz(one)
+    {
+        let mut blobs = Vec::new();
+        for (name, shape, data) in arrays {
+            let mut npy = Vec::new();
+            fmaps::mesh_io::npy::write_f64(&mut npy, shape, data).map_err(runtime)?;
+            blobs.push((format!("{name}.npy"), npy));
+        }
+        let entries: Vec<(&str, &[u8])> = blobs
+            .iter()
+            .map(|(n, d)| (n.as_str(), d.as_slice()))
+            .collect();
+        staged.stage(one, |tmp| {
+            let mut f = std::fs::File::create(tmp)?;
+            fmaps::mesh_io::npz::write_archive(&mut f, &entries)?;
+            Ok(())
+        })?;
+        return staged.commit();
+    }
+    for (path, (_, shape, data)) in files.iter().zip(arrays) {
         staged.stage(path, |tmp| {
             Ok(fmaps::mesh_io::npy::save_f64(tmp, shape, data)?)
         })?;

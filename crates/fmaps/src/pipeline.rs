@@ -179,13 +179,18 @@ fn match_map(
         )));
     }
     let t = Instant::now();
-    let lm_a: Vec<usize> = d.landmarks.iter().map(|p| p.0).collect();
-    let lm_b: Vec<usize> = d.landmarks.iter().map(|p| p.1).collect();
-    let (da, db) = rayon::join(
-        || shape_descriptors(a, &lm_a, params),
-        || shape_descriptors(b, &lm_b, params),
-    );
-    let (da, db) = (da?, db?);
+    let (da, db) = match &d.given {
+        Some(given) => given_descriptors(a, b, given, d)?,
+        None => {
+            let lm_a: Vec<usize> = d.landmarks.iter().map(|p| p.0).collect();
+            let lm_b: Vec<usize> = d.landmarks.iter().map(|p| p.1).collect();
+            let (da, db) = rayon::join(
+                || shape_descriptors(a, &lm_a, params),
+                || shape_descriptors(b, &lm_b, params),
+            );
+            (da?, db?)
+        }
+    };
     // Checked and compressed once for every start.
     let described = Described::new(a, b, &da, &db, params)?;
     let seconds = t.elapsed().as_secs_f64();
@@ -202,4 +207,43 @@ fn match_map(
     out.times.refine += sampling_seconds;
     out.times.total += sampling_seconds;
     Ok(out)
+}
+
+/// The user's descriptors ([`DescriptorOptions::given`]) checked against
+/// the shapes: one row per vertex, the same columns on both, finite, no
+/// landmarks besides.
+fn given_descriptors(
+    a: &PreparedShape,
+    b: &PreparedShape,
+    given: &(nalgebra::DMatrix<f64>, nalgebra::DMatrix<f64>),
+    d: &DescriptorOptions,
+) -> Result<(nalgebra::DMatrix<f64>, nalgebra::DMatrix<f64>), MatchError> {
+    let bad = |m: String| Err(MatchError::InvalidParameter(m));
+    let (da, db) = given;
+    if !d.landmarks.is_empty() {
+        return bad("landmarks add spectral landmark descriptors: with given descriptors, add landmark columns to them".into());
+    }
+    for (name, m, n) in [("A", da, a.basis.n()), ("B", db, b.basis.n())] {
+        if m.nrows() != n {
+            return bad(format!(
+                "the descriptors of {name} have {} rows, the shape has {n} vertices (one row per vertex)",
+                m.nrows()
+            ));
+        }
+        if let Some(i) = m.iter().position(|x| !x.is_finite()) {
+            return bad(format!(
+                "the descriptors of {name}: entry ({}, {}) is not finite",
+                i % m.nrows(),
+                i / m.nrows()
+            ));
+        }
+    }
+    if da.ncols() != db.ncols() || da.ncols() == 0 {
+        return bad(format!(
+            "descriptors of A and B need the same number of columns (at least 1), got {} and {}",
+            da.ncols(),
+            db.ncols()
+        ));
+    }
+    Ok((da.clone(), db.clone()))
 }

@@ -45,6 +45,7 @@
 #![deny(missing_docs)]
 #![forbid(unsafe_code)]
 
+pub mod arrays;
 pub mod atomic;
 pub mod basis;
 mod corres;

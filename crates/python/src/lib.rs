@@ -1002,11 +1002,15 @@ fn evaluate<'py>(
     Ok(d)
 }
 
-/// Reads a `.vts` ground-truth file (or a `.map` file): 0-based int64.
+/// Reads a `.vts` ground-truth file, a `.map` file (both 1-based on
+/// disk) or a NumPy file of indices (`.npy`/`.npz`, 0-based, any integer
+/// dtype): 0-based int64.
 #[pyfunction]
 fn read_indices<'py>(py: Python<'py>, path: PathBuf) -> PyResult<Bound<'py, PyArray1<i64>>> {
     let is_map = path.extension().is_some_and(|e| e == "map");
-    let v = if is_map {
+    let v = if fmaps::mesh_io::arrays::is_numpy(&path) {
+        fmaps::mesh_io::arrays::read_indices(&path)
+    } else if is_map {
         fmaps::mesh_io::read_map(&path)
     } else {
         fmaps::mesh_io::read_vts(&path)

@@ -201,3 +201,49 @@ def test_the_viewer_page_is_written_and_checks_its_input(pair, tmp_path):
         fmaps.viewer_html(a, b, m, error=[0.0, 1.0, 2.0])
     with pytest.raises(fmaps.FmapsError, match="^map_ab: entry 0 is"):
         fmaps.viewer_html(a, b, np.full(a.n_vertices, b.n_vertices))
+
+
+def test_numpy_files_go_in_and_out_of_the_cli(pair, tmp_path):
+    import subprocess
+
+    from test_fmaps import cli
+
+    a, b = pair
+    a.save(tmp_path / "a.off")
+    b.save(tmp_path / "b.off")
+    base = [cli(), "match", str(tmp_path / "a.off"), str(tmp_path / "b.off"), "--refine", "none"]
+    subprocess.run(base + ["--out", str(tmp_path / "m.map"), "--save-fmap", str(tmp_path / "c.txt")], check=True, capture_output=True)
+    subprocess.run(base + ["--out", str(tmp_path / "m.npy"), "--save-fmap", str(tmp_path / "c.npy")], check=True, capture_output=True)
+    m = np.load(tmp_path / "m.npy")
+    # 0-based int64 in NumPy files, the same map as the 1-based text file.
+    assert m.dtype == np.int64 and np.array_equal(m, fmaps.read_indices(tmp_path / "m.map"))
+    assert np.array_equal(np.load(tmp_path / "c.npy"), np.loadtxt(tmp_path / "c.txt"))
+    # A map saved by NumPy as int32, and as a compressed-free .npz, goes in.
+    np.save(tmp_path / "m32.npy", m.astype(np.int32))
+    np.savez(tmp_path / "mz.npz", m)
+    for init in ("m32.npy", "mz.npz", "m.map"):
+        assert np.array_equal(fmaps.read_indices(tmp_path / init), m)
+        subprocess.run(
+            [cli(), "refine", str(tmp_path / "a.off"), str(tmp_path / "b.off"), "--init-map", str(tmp_path / init),
+             "--refine", "icp", "--out", str(tmp_path / f"r-{init}.npy")],
+            check=True, capture_output=True,
+        )
+    r = [np.load(tmp_path / f"r-{i}.npy") for i in ("m32.npy", "mz.npz", "m.map")]
+    assert np.array_equal(r[0], r[1]) and np.array_equal(r[0], r[2])
+    # Own descriptors from NumPy: the pipeline's own descriptors given as
+    # files give the pipeline's map (float32: rounded, still the map).
+    pa, pb = fmaps.prepare(a), fmaps.prepare(b)
+    for dtype in (np.float64, np.float32):
+        np.save(tmp_path / "da.npy", fmaps.descriptors(pa).astype(dtype))
+        np.save(tmp_path / "db.npy", fmaps.descriptors(pb).astype(dtype))
+        subprocess.run(base + ["--descr-source", str(tmp_path / "da.npy"), "--descr-target", str(tmp_path / "db.npy"),
+                               "--out", str(tmp_path / "own.npy")], check=True, capture_output=True)
+        own = np.load(tmp_path / "own.npy")
+        assert np.array_equal(own, m) if dtype == np.float64 else (own == m).mean() > 0.99
+    # A pickle inside is refused, naming the file.
+    np.save(tmp_path / "obj.npy", np.array([object()] * a.n_vertices), allow_pickle=True)
+    bad = subprocess.run(
+        [cli(), "refine", str(tmp_path / "a.off"), str(tmp_path / "b.off"), "--init-map", str(tmp_path / "obj.npy")],
+        capture_output=True, text=True,
+    )
+    assert bad.returncode == 2 and "obj.npy" in bad.stderr and "pickle" in bad.stderr, bad.stderr

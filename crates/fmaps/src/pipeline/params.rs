@@ -100,6 +100,11 @@ pub struct DescriptorOptions {
     /// ([`fmaps_solve::compress_descriptors`]); the energy is unchanged to
     /// rounding. On by default.
     pub compress: bool,
+    /// The user's own per-vertex descriptors of A and B (n_A x p and
+    /// n_B x p, column q of both the same descriptor), used instead of
+    /// the spectral ones (the family, samples and landmarks then do not
+    /// apply). `None`: the pipeline computes them.
+    pub given: Option<std::sync::Arc<(nalgebra::DMatrix<f64>, nalgebra::DMatrix<f64>)>>,
 }
 
 impl Default for DescriptorOptions {
@@ -112,6 +117,7 @@ impl Default for DescriptorOptions {
             subsample: d.subsample,
             landmarks: Vec::new(),
             compress: true,
+            given: None,
         }
     }
 }

@@ -292,7 +292,7 @@ def evaluate(
     """Geodesic errors of `map_ab` against ground truth, as `fmaps eval`."""
 
 def read_indices(path: Union[str, PathLike]) -> npt.NDArray[np.int64]:
-    """A .vts ground-truth or .map file, 0-based."""
+    """A .vts ground-truth or .map file (1-based on disk), or a NumPy file of indices (.npy/.npz, 0-based): 0-based."""
 
 def demo_pairs(subdivisions: int = 4) -> list:
     """The built-in pairs of `fmaps demo`: dicts with name, title, a, b, gt_a, gt_b, gt_b_sym."""
