@@ -257,7 +257,7 @@ fn pictures(
     }
     // The interactive viewer: the map, its error, picking.
     let per_vertex = fmaps::pictures::vertex_values(a, &case.rows, &o.refined.errors);
-    let page = crate::render_cmd::ViewerPage {
+    let page = crate::viewer_page::ViewerPage {
         title: case.title.clone(),
         names: ["source".into(), "target".into()],
         meshes: [a, b],

@@ -54,7 +54,7 @@ impl DescriptorFiles {
 
 /// One descriptor file, `n` rows.
 fn one(path: &Path, n: usize) -> Result<nalgebra::DMatrix<f64>, Failure> {
-    let m = crate::render_cmd::read_matrix(path)?;
+    let m = crate::value_files::read_matrix(path)?;
     if m.nrows() != n {
         return Err(input(anyhow::anyhow!(
             "{}: {} rows, but the mesh has {n} vertices (one row per vertex)",

@@ -24,6 +24,8 @@ mod refine_cmd;
 mod render_cmd;
 mod spectrum;
 mod train_cmd;
+mod value_files;
+mod viewer_page;
 mod weights;
 
 use eval::eval;
@@ -128,7 +130,8 @@ starts there, so the quality of an initial map and of a refiner can be measured 
     #[command(
         after_help = "Examples:\n  fmaps spectrum --builtin sphere --k 36\n  fmaps spectrum tr_reg_000.off --k 100 --json --out basis.npy\n\n\
 --out FILE.npy writes the eigenvectors (n x k, float64), FILE_eigenvalues.npy (k) and FILE_mass.npy\n\
-(n, the lumped mass diagonal); in Python: phi = np.load('FILE.npy'), and phi.T @ (mass[:, None] * phi) = I."
+(n, the lumped mass diagonal); in Python: phi = np.load('FILE.npy'), and phi.T @ (mass[:, None] * phi) = I.\n\
+--out FILE.npz writes one archive with the arrays eigenvectors, eigenvalues and mass."
     )]
     Spectrum {
         /// Mesh file (.off, .obj, .ply); omit with --builtin.
@@ -534,4 +537,38 @@ fn read_indices(p: &Path, n: usize, vts: bool) -> Result<Vec<usize>, Failure> {
     .map_err(input)?;
     mesh_io::check_indices(&v, n, Some(p)).map_err(input)?;
     Ok(v)
+}
+
+/// A pipeline error as a failure: bad input (exit 2) for parameters the
+/// meshes cannot satisfy and meshes the pipeline cannot use, as in `fmaps
+/// spectrum`; else a runtime failure. `file`: the mesh it is about.
+pub(crate) fn match_failure(e: fmaps::pipeline::MatchError, file: Option<&Path>) -> Failure {
+    use fmaps::pipeline::MatchError;
+    let code = match e {
+        MatchError::InvalidParameter(_)
+        | MatchError::InvalidShape { .. }
+        | MatchError::Spectrum {
+            source:
+                fmaps::eigensolve::Error::InvalidK { .. }
+                | fmaps::eigensolve::Error::NonPositiveMass { .. }
+                | fmaps::eigensolve::Error::InvalidParameter(_),
+            ..
+        }
+        // A refinement the options do not allow on these meshes (too few
+        // samples for the schedule, too few eigenpairs).
+        | MatchError::Refine(
+            fmaps::refine::Error::InvalidParameter(_)
+            | fmaps::refine::Error::NotEnoughEigenpairs { .. }
+            | fmaps::refine::Error::SingularSample { .. },
+        ) => 2,
+        _ => 1,
+    };
+    let e = anyhow::Error::new(e);
+    Failure(
+        code,
+        match file {
+            Some(p) => e.context(p.display().to_string()),
+            None => e,
+        },
+    )
 }

@@ -394,40 +394,6 @@ pub(crate) fn parse_starts(text: &str) -> Result<Vec<usize>, String> {
         .collect()
 }
 
-/// A pipeline error as a failure: bad input (exit 2) for parameters the
-/// meshes cannot satisfy and meshes the pipeline cannot use, as in `fmaps
-/// spectrum`; else a runtime failure. `file`: the mesh it is about.
-pub(crate) fn match_failure(e: fmaps::pipeline::MatchError, file: Option<&Path>) -> Failure {
-    use fmaps::pipeline::MatchError;
-    let code = match e {
-        MatchError::InvalidParameter(_)
-        | MatchError::InvalidShape { .. }
-        | MatchError::Spectrum {
-            source:
-                fmaps::eigensolve::Error::InvalidK { .. }
-                | fmaps::eigensolve::Error::NonPositiveMass { .. }
-                | fmaps::eigensolve::Error::InvalidParameter(_),
-            ..
-        }
-        // A refinement the options do not allow on these meshes (too few
-        // samples for the schedule, too few eigenpairs).
-        | MatchError::Refine(
-            fmaps::refine::Error::InvalidParameter(_)
-            | fmaps::refine::Error::NotEnoughEigenpairs { .. }
-            | fmaps::refine::Error::SingularSample { .. },
-        ) => 2,
-        _ => 1,
-    };
-    let e = anyhow::Error::new(e);
-    Failure(
-        code,
-        match file {
-            Some(p) => e.context(p.display().to_string()),
-            None => e,
-        },
-    )
-}
-
 pub(crate) fn match_cmd(args: &MatchArgs) -> Result<(), Failure> {
     use fmaps::pipeline::{MatchError, match_shapes_with_progress};
     let outs: Vec<&Path> = [&args.out, &args.save_fmap]

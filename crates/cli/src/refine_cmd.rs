@@ -4,7 +4,8 @@ use super::*;
 
 use fmaps::pipeline::{MatchParams, Refinement};
 
-use crate::match_cmd::{match_failure, refiner_kind_parser};
+use crate::match_cmd::refiner_kind_parser;
+use crate::match_failure;
 use fmaps::pipeline::RefinerKind;
 
 /// Options of `fmaps refine`.
