@@ -13,8 +13,6 @@
 use std::io::{self, Write};
 use std::path::Path;
 
-use crate::arrays::{Values, parse_numeric};
-
 /// An array read from a `.npy` file: its shape and its values in
 /// column-major (Fortran) order.
 #[derive(Debug, Clone, PartialEq)]
@@ -72,6 +70,188 @@ pub fn write_u8<W: Write>(w: &mut W, data: &[u8]) -> io::Result<()> {
 /// all ([`crate::atomic`]).
 pub fn save_f64(path: &Path, shape: &[usize], data: &[f64]) -> io::Result<()> {
     crate::atomic::write_atomically(path, |mut w| write_f64(&mut w, shape, data))
+}
+
+/// The values of a numeric array, in column-major (Fortran) order.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Values {
+    /// An integer dtype (any width, signed or not) as i64.
+    Int(Vec<i64>),
+    /// A float dtype (float32, float64) as f64.
+    Float(Vec<f64>),
+}
+
+/// A numeric array read from a NumPy file.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Numeric {
+    /// The dimensions (empty for a scalar).
+    pub shape: Vec<usize>,
+    /// The values, column-major.
+    pub values: Values,
+    /// The file's dtype as NumPy writes it (`<i4`, `>f8`, ...).
+    pub dtype: String,
+}
+
+const PICKLE: &str = "dtype object: the array holds a pickle, which fmaps does not run; save plain numbers (np.save(..., allow_pickle=False))";
+
+/// Parses one `.npy` array of any real or integer dtype. The error gives
+/// the byte offset where known and what is wrong.
+pub fn parse_numeric(bytes: &[u8]) -> std::result::Result<Numeric, (Option<usize>, String)> {
+    use npyz::{DType, TypeChar};
+    let mut rest = bytes;
+    let header = npyz::NpyHeader::from_reader(&mut rest).map_err(|e| {
+        let head = String::from_utf8_lossy(&bytes[..bytes.len().min(4096)]);
+        if head.contains("'descr': '|O'") {
+            (Some(0), PICKLE.to_string())
+        } else {
+            (Some(0), format!("not a NumPy .npy array ({e})"))
+        }
+    })?;
+    let start = bytes.len() - rest.len();
+    let file = npyz::NpyFile::with_header(header, rest);
+    let dtype = file.dtype();
+    let DType::Plain(ts) = &dtype else {
+        return Err((
+            Some(0),
+            format!(
+                "dtype {}: a structured array; save plain numbers",
+                dtype.descr()
+            ),
+        ));
+    };
+    let descr = ts.to_string();
+    let shape: Vec<usize> = file
+        .shape()
+        .iter()
+        .map(|&d| usize::try_from(d).unwrap_or(usize::MAX))
+        .collect();
+    let fortran = matches!(file.order(), npyz::Order::Fortran);
+    let size = ts.num_bytes().unwrap_or(0);
+    let n = shape
+        .iter()
+        .try_fold(1usize, |a, &d| a.checked_mul(d))
+        .ok_or((Some(0), format!("shape {shape:?} overflows")))?;
+    let needed = n
+        .checked_mul(size)
+        .ok_or((Some(0), format!("shape {shape:?} overflows")))?;
+    if rest.len() != needed {
+        return Err((
+            Some(start),
+            format!(
+                "shape {shape:?} of {descr} needs {needed} bytes of data, the file has {}",
+                rest.len()
+            ),
+        ));
+    }
+    let bad = |what: &str| (Some(0), format!("dtype {descr}: {what}"));
+    let io = |e: std::io::Error| (Some(start), format!("the data: {e}"));
+    let ints = |v: Vec<i64>| Values::Int(v);
+    let values = match (ts.type_char(), size) {
+        (TypeChar::Int, 1) => ints(
+            file.into_vec::<i8>()
+                .map_err(io)?
+                .into_iter()
+                .map(i64::from)
+                .collect(),
+        ),
+        (TypeChar::Int, 2) => ints(
+            file.into_vec::<i16>()
+                .map_err(io)?
+                .into_iter()
+                .map(i64::from)
+                .collect(),
+        ),
+        (TypeChar::Int, 4) => ints(
+            file.into_vec::<i32>()
+                .map_err(io)?
+                .into_iter()
+                .map(i64::from)
+                .collect(),
+        ),
+        (TypeChar::Int, 8) => ints(file.into_vec::<i64>().map_err(io)?),
+        (TypeChar::Uint, 1) => ints(
+            file.into_vec::<u8>()
+                .map_err(io)?
+                .into_iter()
+                .map(i64::from)
+                .collect(),
+        ),
+        (TypeChar::Uint, 2) => ints(
+            file.into_vec::<u16>()
+                .map_err(io)?
+                .into_iter()
+                .map(i64::from)
+                .collect(),
+        ),
+        (TypeChar::Uint, 4) => ints(
+            file.into_vec::<u32>()
+                .map_err(io)?
+                .into_iter()
+                .map(i64::from)
+                .collect(),
+        ),
+        (TypeChar::Uint, 8) => {
+            let v = file.into_vec::<u64>().map_err(io)?;
+            let mut out = Vec::with_capacity(v.len());
+            for (i, x) in v.into_iter().enumerate() {
+                out.push(
+                    i64::try_from(x)
+                        .map_err(|_| bad(&format!("entry {i} is {x}, above 2^63 - 1")))?,
+                );
+            }
+            ints(out)
+        }
+        (TypeChar::Float, 4) => Values::Float(
+            file.into_vec::<f32>()
+                .map_err(io)?
+                .into_iter()
+                .map(f64::from)
+                .collect(),
+        ),
+        (TypeChar::Float, 8) => Values::Float(file.into_vec::<f64>().map_err(io)?),
+        (TypeChar::Bool, _) => return Err(bad("booleans, where numbers are needed")),
+        (TypeChar::Complex, _) => return Err(bad("complex numbers, where real ones are needed")),
+        (TypeChar::Float, _) => return Err(bad("a float width other than 32 or 64 bits")),
+        _ => return Err(bad("not a number type")),
+    };
+    let values = if fortran || shape.len() < 2 {
+        values
+    } else {
+        match values {
+            Values::Int(v) => Values::Int(c_to_fortran(&shape, &v)),
+            Values::Float(v) => Values::Float(c_to_fortran(&shape, &v)),
+        }
+    };
+    Ok(Numeric {
+        shape,
+        values,
+        dtype: descr,
+    })
+}
+
+/// C-order (row-major) values of `shape` in column-major order.
+fn c_to_fortran<T: Copy>(shape: &[usize], values: &[T]) -> Vec<T> {
+    let n = values.len();
+    let mut out = Vec::with_capacity(n);
+    // Strides of the C layout; iterate column-major multi-indices.
+    let d = shape.len();
+    let mut strides = vec![1usize; d];
+    for k in (0..d.saturating_sub(1)).rev() {
+        strides[k] = strides[k + 1] * shape[k + 1];
+    }
+    let mut idx = vec![0usize; d];
+    for _ in 0..n {
+        let at: usize = idx.iter().zip(&strides).map(|(i, s)| i * s).sum();
+        out.push(values[at]);
+        for k in 0..d {
+            idx[k] += 1;
+            if idx[k] < shape[k] {
+                break;
+            }
+            idx[k] = 0;
+        }
+    }
+    out
 }
 
 /// Reads an array of exactly the dtype `descr` (any order; returned
