@@ -318,7 +318,8 @@ pub fn learn_parity(args: &ParityArgs) -> anyhow::Result<()> {
 
 /// `learned[:KEY=VALUE,..]`: the pipeline with learned features (the
 /// shipped model unless `model=PATH`), keys `adapt=N` (test-time
-/// adaptation steps), `lr=X` (their learning rate), `map=features|spectral`
+/// adaptation steps), `lr=X` (their learning rate), `dirichlet=W` (the
+/// weight of the Dirichlet term in them), `map=features|spectral`
 /// (the initial point map), `k=K` (the map's size, 50), `refine=REFINER`
 /// (a refiner of `REFINER@PUBLISHED`, or `default` for what `fmaps match`
 /// runs by default; none without); `None` for other methods.
@@ -346,6 +347,10 @@ pub(crate) fn learned_method(method: &str) -> anyhow::Result<Option<fmaps::Match
             }
             "adapt" => learned.adaptation.steps = v.parse().with_context(|| kv.to_string())?,
             "lr" => learned.adaptation.lr = v.parse().with_context(|| kv.to_string())?,
+            "dirichlet" => {
+                learned.adaptation.recipe.weights.dirichlet =
+                    v.parse().with_context(|| kv.to_string())?
+            }
             "map" => learned.point_map = v.parse().map_err(anyhow::Error::msg)?,
             "k" => params.k = v.parse().with_context(|| kv.to_string())?,
             "refine" => {
@@ -354,7 +359,9 @@ pub(crate) fn learned_method(method: &str) -> anyhow::Result<Option<fmaps::Match
                     r => crate::eval::refiner_method(r)?,
                 }
             }
-            _ => anyhow::bail!("{method}: unknown key '{k}' (model, adapt, lr, map, k, refine)"),
+            _ => anyhow::bail!(
+                "{method}: unknown key '{k}' (model, adapt, lr, dirichlet, map, k, refine)"
+            ),
         }
     }
     params.features = Features::Learned(learned);

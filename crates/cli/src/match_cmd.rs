@@ -87,7 +87,9 @@ pub(crate) struct MatchArgs {
     /// distortion and orientation together (about the default's time: its
     /// initialisation runs on fewer samples; the accuracy table of docs/benchmarks.md,
     /// column `non-isometric`). Other refinements ignore
-    /// it.
+    /// it. With learned features and --adapt, the adaptation also
+    /// minimises the Dirichlet energy of the soft point maps (a
+    /// smoothness term).
     #[arg(long)]
     non_isometric: bool,
     /// Smooth Shells runs both settings, the default's and
@@ -319,7 +321,14 @@ pub(crate) fn params_of(args: &MatchArgs, sizes: (usize, usize)) -> Result<Match
     params.energy.orient_reversing = args.mirrored;
     params.adjoint = args.refiner.adjoint;
     params.area_normalize = !args.no_area_normalize;
-    let learned = crate::train_cmd::learned_features(&args.features, args.adapt, args.point_map)?;
+    let learned = crate::train_cmd::learned_features(&args.features, args.adapt, args.point_map)?
+        .map(|l| {
+            if args.non_isometric {
+                l.non_isometric()
+            } else {
+                l
+            }
+        });
     let (kind, mut options) = refinement(args, sizes, learned.is_some());
     if learned.is_some() && args.refine.is_none() && args.refiner.zoomout.is_none() {
         use fmaps::pipeline::LearnedFeatures;
@@ -465,6 +474,7 @@ pub(crate) fn match_cmd(args: &MatchArgs) -> Result<(), Failure> {
             "features": match &params.features {
                 fmaps::pipeline::Features::Learned(l) => json!({
                     "kind": "learned", "adapt": l.adaptation.steps,
+                    "adapt_dirichlet": l.adaptation.recipe.weights.dirichlet,
                     "point_map": l.point_map.name(),
                     "model": args.features.strip_prefix("learned=").unwrap_or("shipped"),
                 }),

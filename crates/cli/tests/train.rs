@@ -277,6 +277,39 @@ fn match_with_learned_features() {
     assert!(o.status.success(), "{}", stderr(&o));
     let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
     assert_eq!(v["features"]["adapt"], 2);
+    assert_eq!(v["features"]["adapt_dirichlet"], 0.0);
+    // --non-isometric adds the Dirichlet term to the adaptation (which
+    // needs the shapes' geometry: the run fails without it).
+    let with = |extra: &[&str]| {
+        let o = fmaps()
+            .current_dir(&dir)
+            .args([
+                "--threads",
+                "1",
+                "match",
+                "rest.off",
+                "walking.off",
+                "--json",
+            ])
+            .args([
+                "--features",
+                "learned=small.npz",
+                "--adapt",
+                "2",
+                "-k",
+                "16",
+            ])
+            .args(["--refine", "none"])
+            .args(extra)
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", stderr(&o));
+        serde_json::from_slice::<serde_json::Value>(&o.stdout).unwrap()
+    };
+    assert_eq!(
+        with(&["--non-isometric"])["features"]["adapt_dirichlet"],
+        fmaps::pipeline::LearnedFeatures::NON_ISOMETRIC_DIRICHLET
+    );
     std::fs::write(dir.join("junk.npz"), b"not a model").unwrap();
     // The features as colours, of the shipped model and of a file.
     for extra in [&[][..], &["--model", "small.npz"][..]] {

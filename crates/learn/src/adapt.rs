@@ -117,3 +117,51 @@ pub fn adapt(
     }
     Ok(Adapted { model, losses })
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::model::{Architecture, Preprocessing};
+
+    /// With the Dirichlet term the adaptation records it and moves the
+    /// network elsewhere; the model given is unchanged either way.
+    #[test]
+    fn the_dirichlet_term_adapts_the_model_differently() {
+        let arch = Architecture {
+            inputs: 8,
+            width: 8,
+            blocks: 1,
+            outputs: 8,
+        };
+        let pre = Preprocessing {
+            eigenpairs: 12,
+            ..Preprocessing::default()
+        };
+        let model = Model::new(arch, pre, 1);
+        let mut plain = Adaptation {
+            steps: 3,
+            ..Adaptation::default()
+        };
+        plain.recipe.fmap_eigenpairs = 10;
+        plain.recipe.coupling_samples = Some(100);
+        let mut smooth = plain.clone();
+        smooth.recipe.weights.dirichlet = 10.0;
+        let pair = fmaps_shapes::creature_pair(2);
+        let x = TrainShape::new("a", &pair.source, &model, &plain.recipe)
+            .unwrap()
+            .with_geometry(&pair.source)
+            .unwrap();
+        let y = TrainShape::new("b", &pair.target, &model, &plain.recipe)
+            .unwrap()
+            .with_geometry(&pair.target)
+            .unwrap();
+        let a = adapt(&model, &x, &y, &plain).unwrap();
+        let b = adapt(&model, &x, &y, &smooth).unwrap();
+        assert!(a.losses.iter().all(|l| l.dirichlet == 0.0));
+        assert!(b.losses.iter().all(|l| l.dirichlet > 0.0));
+        // The first step's other terms are the same network's.
+        assert_eq!(a.losses[0].coupling, b.losses[0].coupling);
+        assert_ne!(a.model, b.model);
+        assert_ne!(a.model, model);
+    }
+}

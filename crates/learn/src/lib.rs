@@ -33,6 +33,7 @@
 pub mod adapt;
 pub mod augment;
 pub mod coupling;
+pub mod dirichlet;
 pub mod fmap_layer;
 mod gemm;
 pub mod layers;

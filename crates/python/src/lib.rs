@@ -542,7 +542,10 @@ fn match_shapes(
         // Further initial sizes (`[]`: one start, as pyFM runs ZoomOut).
         params.starts.sizes = s;
     }
-    learned::apply(&mut params, learned);
+    learned::apply(
+        &mut params,
+        learned.map(|l| if non_isometric { l.non_isometric() } else { l }),
+    );
     // As `fmaps match`: the eigenpairs the pipeline uses, or those given
     // (at least the refinement's).
     params.k_process = match k_process {
@@ -794,16 +797,23 @@ fn _prepared_from_state(
 }
 
 /// The per-shape stages of the pipeline for `mesh`: scaled to unit area
-/// (unless `area_normalize` is off), Laplacian, `k_process` eigenpairs.
-/// Compute it once per shape and match it with [`match_prepared`] against
-/// every other (the maps equal [`match_shapes`]'s).
+/// (unless `area_normalize` is off), Laplacian, `k_process` eigenpairs,
+/// and with `features = "learned"` the network's operators and features
+/// (of `model`, the shipped one by default; `adapt` > 0 prepares the
+/// eigenpairs its losses need). Compute it once per shape and match it
+/// with [`match_prepared`] against every other (the maps equal
+/// [`match_shapes`]'s).
 #[pyfunction]
-#[pyo3(signature = (mesh, *, k_process = 200, area_normalize = true, threads = None))]
+#[pyo3(signature = (mesh, *, k_process = 200, area_normalize = true, features = "descriptors", model = None, adapt = 0, threads = None))]
+#[allow(clippy::too_many_arguments)]
 fn prepare(
     py: Python<'_>,
     mesh: &Mesh,
     k_process: usize,
     area_normalize: bool,
+    features: &str,
+    model: Option<std::path::PathBuf>,
+    adapt: usize,
     threads: Option<usize>,
 ) -> PyResult<PreparedShape> {
     let m = Arc::clone(&mesh.inner);
@@ -811,6 +821,20 @@ fn prepare(
     params.k_process = k_process;
     params.descriptors.eigenpairs = MatchParams::default().descriptors.eigenpairs.min(k_process);
     params.area_normalize = area_normalize;
+    if let Some(l) = learned::learned_of(features, model, adapt, None)? {
+        let needed = l.eigenpairs();
+        if needed > k_process {
+            return Err(err(format!(
+                "features = \"learned\" needs k_process >= {needed} (the model's eigenpairs{}), got {k_process}",
+                if adapt > 0 {
+                    " and its adaptation's"
+                } else {
+                    ""
+                }
+            )));
+        }
+        learned::apply(&mut params, Some(l));
+    }
     // One thread for the eigensolver, as the pipeline prepares its shapes
     // (the basis does not depend on it).
     let mut single = params.clone();
@@ -880,7 +904,10 @@ fn match_prepared(
     if let Some(s) = starts {
         params.starts.sizes = s;
     }
-    learned::apply(&mut params, learned);
+    learned::apply(
+        &mut params,
+        learned.map(|l| if non_isometric { l.non_isometric() } else { l }),
+    );
     params.descriptors.landmarks = landmarks;
     let (r, quality) = run(py, threads, move || {
         let r = fmaps::pipeline::match_prepared(&pa, &pb, &params).map_err(|e| e.to_string())?;

@@ -56,6 +56,12 @@ def test_a_trained_model_matches_and_adapts(tmp_path, pairs_small):
     prepared = [fmaps.prepare(m, k_process=60, threads=1) for m in (a, b)]
     again = fmaps.match_prepared(*prepared, features="learned", model=str(model), refine="none", k=16, threads=1)
     assert np.array_equal(again.map_ab, same.map_ab)
+    # Shapes prepared with the model's features give the same map.
+    learned = [fmaps.prepare(m, k_process=60, features="learned", model=str(model), threads=1) for m in (a, b)]
+    third = fmaps.match_prepared(*learned, features="learned", model=str(model), refine="none", k=16, threads=1)
+    assert np.array_equal(third.map_ab, same.map_ab)
+    with pytest.raises(fmaps.FmapsError, match="k_process >= 24"):
+        fmaps.prepare(a, k_process=20, features="learned", model=str(model))
 
 
 @pytest.fixture(scope="module")
@@ -69,6 +75,8 @@ def test_learned_options_need_learned_features():
     for kwargs in ({"adapt": 2}, {"point_map": "spectral"}, {"model": "m.npz"}):
         with pytest.raises(fmaps.FmapsError, match="learned features"):
             fmaps.match_shapes(p["a"], p["b"], **kwargs)
+    with pytest.raises(fmaps.FmapsError, match="learned features"):
+        fmaps.prepare(p["a"], adapt=2)
     with pytest.raises(fmaps.FmapsError, match="descriptors"):
         fmaps.match_shapes(p["a"], p["b"], features="wks")
     with pytest.raises(fmaps.FmapsError, match="absent.npz"):

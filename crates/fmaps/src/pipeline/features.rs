@@ -99,6 +99,20 @@ impl LearnedFeatures {
         }
     }
 
+    /// The weight of the Dirichlet energy of the soft maps in the
+    /// adaptation's losses for non-isometric pairs
+    /// ([`LearnedFeatures::non_isometric`]).
+    pub const NON_ISOMETRIC_DIRICHLET: f64 = 10.0;
+
+    /// For non-isometric pairs: the adaptation's losses also hold the
+    /// Dirichlet energy of the soft point maps
+    /// ([`fmaps_learn::dirichlet`]), weight
+    /// [`Self::NON_ISOMETRIC_DIRICHLET`] (no effect without adaptation).
+    pub fn non_isometric(mut self) -> LearnedFeatures {
+        self.adaptation.recipe.weights.dirichlet = Self::NON_ISOMETRIC_DIRICHLET;
+        self
+    }
+
     /// The model shipped with fmaps ([`Model::shipped`]).
     pub fn shipped() -> Result<LearnedFeatures, MatchError> {
         Ok(LearnedFeatures::new(Arc::new(
@@ -121,6 +135,17 @@ pub struct LearnedShape {
     pub input: DMatrix<f64>,
     /// The model's features (n x outputs), without adaptation.
     pub features: DMatrix<f64>,
+    /// The model they are of.
+    pub model: Arc<Model>,
+}
+
+impl LearnedShape {
+    /// Whether this state serves `learned`: the same model (the same
+    /// weights), and operators of as many eigenpairs as it needs.
+    pub fn serves(&self, learned: &LearnedFeatures) -> bool {
+        (Arc::ptr_eq(&self.model, &learned.model) || *self.model == *learned.model)
+            && self.operators.eigenvalues.len() >= learned.eigenpairs()
+    }
 }
 
 /// The learned state of a prepared shape (`mesh`: its unit-area mesh,
@@ -162,5 +187,6 @@ pub(super) fn learned_shape(
         operators,
         input,
         features,
+        model: Arc::clone(model),
     })
 }

@@ -25,14 +25,15 @@ use super::refining::{initial_map, refine_and_orient};
 use super::result::{MatchResult, MatchTimes};
 use crate::solve;
 
-/// The learned state of `s`: its own, or computed now (a shape prepared
-/// without learned features).
+/// The learned state of `s`: its own when it serves `learned`, else
+/// computed now (a shape prepared without learned features, or for
+/// another model or fewer eigenpairs).
 fn state_of(
     s: &PreparedShape,
     learned: &LearnedFeatures,
     params: &MatchParams,
 ) -> Result<Arc<LearnedShape>, MatchError> {
-    if let Some(l) = &s.learned {
+    if let Some(l) = s.learned.as_ref().filter(|l| l.serves(learned)) {
         return Ok(Arc::clone(l));
     }
     let mesh = TriMesh::new(s.vertices.clone(), s.faces.clone()).map_err(|e| {
@@ -81,10 +82,21 @@ pub(super) fn match_learned(
         (Cow::Borrowed(&la.features), Cow::Borrowed(&lb.features))
     } else {
         let recipe = &learned.adaptation.recipe;
-        let x =
-            TrainShape::from_operators("source", la.operators.clone(), la.input.clone(), recipe);
-        let y =
-            TrainShape::from_operators("target", lb.operators.clone(), lb.input.clone(), recipe);
+        let shape = |name: &str, s: &PreparedShape, l: &LearnedShape| {
+            let t = TrainShape::from_operators(name, l.operators.clone(), l.input.clone(), recipe);
+            if recipe.weights.dirichlet == 0.0 {
+                return Ok(t);
+            }
+            // The Dirichlet term needs the positions and the stiffness.
+            let mesh = TriMesh::new(s.vertices.clone(), s.faces.clone()).map_err(|e| {
+                MatchError::InvalidShape {
+                    shape: "input",
+                    message: e.to_string(),
+                }
+            })?;
+            t.with_geometry(&mesh).map_err(learn_error)
+        };
+        let (x, y) = (shape("source", a, &la)?, shape("target", b, &lb)?);
         let adapted = adapt(&learned.model, &x, &y, &learned.adaptation).map_err(learn_error)?;
         let m = &adapted.model;
         let (fa, fb) = rayon::join(
@@ -246,6 +258,32 @@ mod tests {
         assert!((&c - &r.c_ba).norm() < 1e-10 * c.norm());
         let t = solve::point_map_from_fmap(&c, &sb, &sa).unwrap();
         assert_eq!(t, r.t_ab);
+    }
+
+    /// A shape prepared for one model and matched with another gets the
+    /// other's features: the map equals the one of shapes prepared for it.
+    #[test]
+    fn prepared_state_of_another_model_is_not_used() {
+        let pair = fmaps_shapes::creature_pair(2);
+        let first = learned_params(small_model(), LearnedPointMap::Features);
+        let arch = small_model().architecture();
+        let other = Arc::new(Model::new(arch, small_model().preprocessing, 11));
+        let second = learned_params(Arc::clone(&other), LearnedPointMap::Features);
+        let a = crate::pipeline::prepare(&pair.source, &first).unwrap();
+        let b = crate::pipeline::prepare(&pair.target, &first).unwrap();
+        let la = a.learned.as_ref().unwrap();
+        let Features::Learned(l2) = &second.features else {
+            unreachable!()
+        };
+        assert!(!la.serves(l2));
+        let mut l3 = l2.clone();
+        l3.model = Arc::new((*small_model()).clone());
+        assert!(la.serves(&l3), "the same weights in another Arc");
+        let r = crate::pipeline::match_prepared(&a, &b, &second).unwrap();
+        let direct = match_shapes(&pair.source, &pair.target, &second).unwrap();
+        let stale = crate::pipeline::match_prepared(&a, &b, &first).unwrap();
+        assert_eq!(r.t_ab, direct.t_ab);
+        assert_ne!(r.t_ab, stale.t_ab, "two models, two maps");
     }
 
     #[test]

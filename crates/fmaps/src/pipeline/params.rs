@@ -66,6 +66,9 @@ pub struct MatchParams {
 /// The features a map is computed from.
 #[derive(Debug, Clone, Default)]
 #[non_exhaustive]
+// Parameters are built once per run: the learned variant's size (its
+// recipe) costs nothing worth a box in every user's match.
+#[allow(clippy::large_enum_variant)]
 pub enum Features {
     /// Spectral descriptors ([`MatchParams::descriptors`]) and the
     /// functional-map energy ([`MatchParams::energy`]), from several

@@ -2,7 +2,7 @@
 //! (Cao, Roetzer, Bernard, SIGGRAPH 2023) trains: each step takes a
 //! random ordered pair (x, y), computes both shapes' features (with
 //! dropout), the functional maps `C_xy` and `C_yx` of the regularised
-//! layer ([`FmapLayer`]) on the first [`Recipe::fmap_eigenpairs`]
+//! layer ([`FmapLayer`](crate::fmap_layer::FmapLayer)) on the first [`Recipe::fmap_eigenpairs`]
 //! eigenpairs, and the loss
 //!
 //! `w_bij · bijectivity + w_orth · orthogonality + w_lap · Laplacian
@@ -28,8 +28,11 @@ use nalgebra::{DMatrix, DVector};
 use serde::{Deserialize, Serialize};
 
 pub use crate::augment::{Augment, Rotation};
+pub use recipe::{FmapLayerParams, LossWeights, Recipe};
+
+mod recipe;
 use crate::coupling::{CouplingShape, coupling};
-use crate::fmap_layer::FmapLayer;
+use crate::dirichlet::{DirichletShape, dirichlet};
 use crate::layers::Spectrum;
 use crate::losses;
 use crate::model::{Input, Model, NetBasis, entry, tensor_npy, write_entries};
@@ -42,147 +45,6 @@ pub const CHECKPOINT_FORMAT: &str = "fmaps-checkpoint";
 /// The checkpoint file's version.
 pub const CHECKPOINT_VERSION: u32 = 1;
 
-/// Weights of the loss terms.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-pub struct LossWeights {
-    /// Bijectivity (ULRSSM: 1).
-    pub bijectivity: f64,
-    /// Orthogonality (1).
-    pub orthogonality: f64,
-    /// Laplacian commutativity (0: off for near-isometric training).
-    pub laplacian: f64,
-    /// Coupling of the functional and soft point maps (1).
-    pub coupling: f64,
-}
-
-impl Default for LossWeights {
-    fn default() -> Self {
-        LossWeights {
-            bijectivity: 1.0,
-            orthogonality: 1.0,
-            laplacian: 0.0,
-            coupling: 1.0,
-        }
-    }
-}
-
-/// A training run's hyper-parameters.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[non_exhaustive]
-pub struct Recipe {
-    /// Pair steps.
-    pub steps: u64,
-    /// Initial learning rate (ULRSSM: 1e-3).
-    pub lr: f64,
-    /// Final learning rate of the cosine schedule (1e-4).
-    pub lr_min: f64,
-    /// Eigenpairs of the functional maps (ULRSSM: 200).
-    pub fmap_eigenpairs: usize,
-    /// The functional-map layer (λ = 100, γ = 0.5).
-    pub fmap: FmapLayerParams,
-    /// Temperature of the soft point maps (0.07).
-    pub tau: f64,
-    /// The loss terms' weights.
-    pub weights: LossWeights,
-    /// Vertices of each shape the coupling loss samples per step (`None`:
-    /// all).
-    pub coupling_samples: Option<usize>,
-    /// Bound on the gradients' global norm (`None`: no clipping).
-    pub clip: Option<f64>,
-    /// Seed of the initial weights and of every random draw.
-    pub seed: u64,
-    /// Dropout in the blocks' MLPs while training (the reference's
-    /// default: on).
-    #[serde(default = "on")]
-    pub dropout: bool,
-    /// Augmentation of coordinate inputs ([`Input::Xyz`]; WKS inputs are
-    /// intrinsic and taken as they are).
-    #[serde(default)]
-    pub augment: Augment,
-}
-
-fn on() -> bool {
-    true
-}
-
-/// [`FmapLayer`]'s parameters as a recipe stores them.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-pub struct FmapLayerParams {
-    /// λ.
-    pub lambda: f64,
-    /// γ.
-    pub gamma: f64,
-}
-
-impl Default for Recipe {
-    /// ULRSSM's FAUST recipe (learning rates, layer, temperature,
-    /// weights) over 1000 steps, the coupling loss on 1000 sampled
-    /// vertices per shape.
-    fn default() -> Self {
-        let l = FmapLayer::default();
-        Recipe {
-            steps: 1000,
-            lr: 1e-3,
-            lr_min: 1e-4,
-            fmap_eigenpairs: 200,
-            fmap: FmapLayerParams {
-                lambda: l.lambda,
-                gamma: l.gamma,
-            },
-            tau: 0.07,
-            weights: LossWeights::default(),
-            coupling_samples: Some(1000),
-            clip: None,
-            seed: 1,
-            dropout: true,
-            augment: Augment::default(),
-        }
-    }
-}
-
-impl Recipe {
-    /// The learning rate of step `step` (0-based): cosine annealing from
-    /// `lr` to `lr_min` over `steps`.
-    pub fn lr_at(&self, step: u64) -> f64 {
-        let t = if self.steps <= 1 {
-            0.0
-        } else {
-            step.min(self.steps - 1) as f64 / (self.steps - 1) as f64
-        };
-        self.lr_min + 0.5 * (self.lr - self.lr_min) * (1.0 + (std::f64::consts::PI * t).cos())
-    }
-
-    fn layer(&self) -> FmapLayer {
-        FmapLayer {
-            lambda: self.fmap.lambda,
-            gamma: self.fmap.gamma,
-        }
-    }
-
-    fn check(&self) -> Result<()> {
-        let bad = |m: String| Err(Error::Parameter(m));
-        if self.steps == 0 {
-            return bad("0 training steps".into());
-        }
-        if !(self.lr > 0.0 && self.lr.is_finite() && self.lr_min >= 0.0 && self.lr_min <= self.lr) {
-            return bad(format!(
-                "learning rates {} -> {}: expected 0 <= lr_min <= lr",
-                self.lr, self.lr_min
-            ));
-        }
-        if self.fmap_eigenpairs < 2 {
-            return bad(format!("{} eigenpairs for the maps", self.fmap_eigenpairs));
-        }
-        if !(self.tau > 0.0 && self.tau.is_finite()) {
-            return bad(format!("temperature {}", self.tau));
-        }
-        if self.coupling_samples == Some(0) {
-            return bad("0 coupling samples".into());
-        }
-        Ok(())
-    }
-}
-
 /// A training shape: its operators, input features and bases.
 #[derive(Debug, Clone)]
 pub struct TrainShape {
@@ -193,6 +55,9 @@ pub struct TrainShape {
     fmap_evals: DVector<f64>,
     /// The maps' eigenvectors when fewer than the operators' (else those).
     fmap_evecs: Option<DMatrix<f64>>,
+    /// The unit-area positions and cotangent stiffness, for the Dirichlet
+    /// loss.
+    geometry: Option<(DMatrix<f64>, sprs::CsMat<f64>)>,
 }
 
 impl TrainShape {
@@ -223,7 +88,29 @@ impl TrainShape {
                 .then(|| ops.eigenvectors.columns(0, k).into_owned()),
             ops,
             input,
+            geometry: None,
         }
+    }
+
+    /// With the geometry the Dirichlet loss needs: `mesh`'s positions and
+    /// cotangent stiffness, scaled to unit area as the operators are
+    /// (`mesh` is the shape the operators were computed on, at any
+    /// scale).
+    pub fn with_geometry(mut self, mesh: &TriMesh) -> Result<TrainShape> {
+        if mesh.n_vertices() != self.input.nrows() {
+            return Err(Error::Parameter(format!(
+                "{}: a mesh of {} vertices for operators of {}",
+                self.name,
+                mesh.n_vertices(),
+                self.input.nrows()
+            )));
+        }
+        let (unit, _) = mesh.to_unit_area()?;
+        self.geometry = Some((
+            crate::dirichlet::positions(&unit),
+            fmaps_laplacian::cotan_stiffness(&unit),
+        ));
+        Ok(self)
     }
 
     /// The shape's operators.
@@ -265,6 +152,9 @@ pub struct LossValues {
     pub laplacian: f64,
     /// Weighted coupling.
     pub coupling: f64,
+    /// Weighted Dirichlet energy of the soft maps.
+    #[serde(default)]
+    pub dirichlet: f64,
     /// Their sum.
     pub total: f64,
 }
@@ -424,7 +314,41 @@ pub fn pair_loss_of<N: FeatureNet>(
         dfx += g.features_x * w.coupling;
         dfy += g.features_y * w.coupling;
     }
-    values.total = values.bijectivity + values.orthogonality + values.laplacian + values.coupling;
+    if w.dirichlet != 0.0 {
+        let (Some((px, lx)), Some((py, ly))) = (&x.geometry, &y.geometry) else {
+            return Err(Error::Parameter(format!(
+                "the Dirichlet loss needs the geometry of {} and {} (TrainShape::with_geometry)",
+                x.name, y.name
+            )));
+        };
+        let centres_x = draw_samples(fx.nrows(), recipe.dirichlet_centres, rng);
+        let centres_y = draw_samples(fy.nrows(), recipe.dirichlet_centres, rng);
+        let g = dirichlet(
+            &DirichletShape {
+                features: &fx,
+                positions: px,
+                stiffness: lx,
+                centres: centres_x.as_deref(),
+                targets: samples_x.as_deref(),
+            },
+            &DirichletShape {
+                features: &fy,
+                positions: py,
+                stiffness: ly,
+                centres: centres_y.as_deref(),
+                targets: samples_y.as_deref(),
+            },
+            recipe.tau,
+        );
+        values.dirichlet = w.dirichlet * g.loss;
+        dfx += g.features_x * w.dirichlet;
+        dfy += g.features_y * w.dirichlet;
+    }
+    values.total = values.bijectivity
+        + values.orthogonality
+        + values.laplacian
+        + values.coupling
+        + values.dirichlet;
     let (da1, db1) = layer.backward_tape(&a, &b, &tape_xy, &d_xy);
     let (db2, da2) = layer.backward_tape(&b, &a, &tape_yx, &d_yx);
     dfx += sx.project_backward(&(da1 + da2));

@@ -45,9 +45,53 @@ fn shapes(model: &Model, recipe: &Recipe) -> Vec<TrainShape> {
 /// of all parameters, with the same masks and samples.
 #[test]
 fn pair_gradient_matches_finite_differences() {
+    pair_gradient_check(0.0);
+}
+
+/// The same with the Dirichlet term of the soft maps (on sampled centres
+/// and targets).
+#[test]
+fn pair_gradient_with_dirichlet_matches_finite_differences() {
+    pair_gradient_check(0.5);
+}
+
+/// A pair step with the Dirichlet term needs the shapes' geometry, and
+/// records the weighted term in the total.
+#[test]
+fn dirichlet_needs_the_geometry() {
+    let (model, mut recipe) = tiny();
+    recipe.weights.dirichlet = 2.0;
+    let s = shapes(&model, &recipe);
+    let e = pair_loss(&model, &recipe, &s[0], &s[2], &mut SplitMix(1), false).unwrap_err();
+    assert!(e.to_string().contains("geometry of a and c"), "{e}");
+    let sphere = fmaps_shapes::icosphere(1.0, 2);
+    let other = TriMesh::new(vec![[0.0; 3]; 3], vec![[0, 1, 2]]).unwrap();
+    let e = s[0].clone().with_geometry(&other).unwrap_err();
+    assert!(e.to_string().contains("3 vertices"), "{e}");
+    let a = s[0].clone().with_geometry(&sphere).unwrap();
+    let (v, _) = pair_loss(&model, &recipe, &a, &a, &mut SplitMix(1), false).unwrap();
+    assert!(v.dirichlet > 0.0);
+    let sum = v.bijectivity + v.orthogonality + v.laplacian + v.coupling + v.dirichlet;
+    assert!((v.total - sum).abs() <= 1e-12 * sum);
+}
+
+fn pair_gradient_check(dirichlet: f64) {
     let (model, mut recipe) = tiny();
     recipe.weights.laplacian = 0.01;
-    let s = shapes(&model, &recipe);
+    recipe.weights.dirichlet = dirichlet;
+    recipe.dirichlet_centres = Some(40);
+    let mut s = shapes(&model, &recipe);
+    if dirichlet != 0.0 {
+        let a = fmaps_shapes::icosphere(1.0, 2);
+        let v: Vec<[f64; 3]> = a
+            .vertices()
+            .iter()
+            .map(|p| [p[0] * 1.3, p[1], p[2] * 0.8])
+            .collect();
+        let c = TriMesh::new(v, a.faces().to_vec()).unwrap();
+        s[0] = s[0].clone().with_geometry(&a).unwrap();
+        s[2] = s[2].clone().with_geometry(&c).unwrap();
+    }
     let mut dir_rng = SplitMix(17);
     let mut dir = model.clone();
     for p in dir.net.params_mut() {

@@ -141,9 +141,19 @@ def match_shapes(
     vertices (then one iteration and the final map on every vertex; the result's refiner name says so)."""
 
 def prepare(
-    mesh: Mesh, *, k_process: int = 200, area_normalize: bool = True, threads: Optional[int] = None
+    mesh: Mesh,
+    *,
+    k_process: int = 200,
+    area_normalize: bool = True,
+    features: str = "descriptors",
+    model: Optional[str] = None,
+    adapt: int = 0,
+    threads: Optional[int] = None,
 ) -> PreparedShape:
-    """The per-shape stages, computed once per shape."""
+    """The per-shape stages, computed once per shape; with
+    features="learned" also the network's operators and features (of
+    `model`, the shipped one by default), which match_prepared(...,
+    features="learned") then reuses."""
 
 def match_prepared(
     a: PreparedShape,
