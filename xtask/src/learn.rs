@@ -322,7 +322,9 @@ pub fn learn_parity(args: &ParityArgs) -> anyhow::Result<()> {
 /// weight of the Dirichlet term in them), `map=features|spectral`
 /// (the initial point map), `k=K` (the map's size, 50), `refine=REFINER`
 /// (a refiner of `REFINER@PUBLISHED`, or `default` for what `fmaps match`
-/// runs by default; none without); `None` for other methods.
+/// runs by default; none without), `second-opinion=true` (the default
+/// descriptor pipeline too, the least area-distorting map kept: `fmaps
+/// match --features learned --second-opinion`); `None` for other methods.
 pub(crate) fn learned_method(method: &str) -> anyhow::Result<Option<fmaps::MatchParams>> {
     use fmaps::pipeline::{Features, LearnedFeatures, Refinement};
     let Some(rest) = method.strip_prefix("learned") else {
@@ -335,6 +337,7 @@ pub(crate) fn learned_method(method: &str) -> anyhow::Result<Option<fmaps::Match
     };
     let mut learned = LearnedFeatures::shipped()?;
     let mut params = fmaps::MatchParams::unrefined();
+    let mut second_opinion = false;
     for kv in list.split(',').filter(|s| !s.is_empty()) {
         let (k, v) = kv
             .split_once('=')
@@ -347,6 +350,7 @@ pub(crate) fn learned_method(method: &str) -> anyhow::Result<Option<fmaps::Match
             }
             "adapt" => learned.adaptation.steps = v.parse().with_context(|| kv.to_string())?,
             "lr" => learned.adaptation.lr = v.parse().with_context(|| kv.to_string())?,
+            "second-opinion" => second_opinion = v.parse().with_context(|| kv.to_string())?,
             "dirichlet" => {
                 learned.adaptation.recipe.weights.dirichlet =
                     v.parse().with_context(|| kv.to_string())?
@@ -360,11 +364,16 @@ pub(crate) fn learned_method(method: &str) -> anyhow::Result<Option<fmaps::Match
                 }
             }
             _ => anyhow::bail!(
-                "{method}: unknown key '{k}' (model, adapt, lr, dirichlet, map, k, refine)"
+                "{method}: unknown key '{k}' (model, adapt, lr, dirichlet, map, k, refine, second-opinion)"
             ),
         }
     }
     params.features = Features::Learned(learned);
     params.k_process = params.k_process_needed();
+    if second_opinion {
+        // The benchmarks' meshes have thousands of vertices: the default
+        // refinement applies.
+        params = params.with_axiomatic_opinion(5000, 5000)?;
+    }
     Ok(Some(params))
 }

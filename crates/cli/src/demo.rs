@@ -1,7 +1,8 @@
 //! `fmaps demo`: the default pipeline on two built-in pairs, a
 //! near-isometric one (the creature in two poses) and a non-isometric one
 //! (two generated bodies of different builds in different poses), with
-//! exact-geodesic errors and pictures.
+//! exact-geodesic errors and pictures; on the bodies also the learned
+//! pipeline (`fmaps match --features learned`), next to the default.
 
 use std::path::Path;
 use std::time::Instant;
@@ -36,6 +37,8 @@ struct Outcome {
     refined: MapReport,
     spectra: f64,
     eval_seconds: f64,
+    /// The learned pipeline's map and its evaluation (the bodies only).
+    learned: Option<(MatchResult, MapReport)>,
 }
 
 pub(crate) fn run(out_dir: &Path, subdivisions: u32, as_json: bool) -> Result<(), Failure> {
@@ -61,7 +64,7 @@ pub(crate) fn run(out_dir: &Path, subdivisions: u32, as_json: bool) -> Result<()
             "{}: eigenbases, functional map, refinement",
             case.title
         ));
-        let o = run_case(case, &params)?;
+        let o = run_case(case, &params, !case.prefix.is_empty())?;
         spinner.stage(&format!("{}: pictures", case.title));
         pictures(case, &o, out_dir, &mut staged, &mut written)?;
         outcomes.push(o);
@@ -82,6 +85,11 @@ pub(crate) fn run(out_dir: &Path, subdivisions: u32, as_json: bool) -> Result<()
                 "mean_error_init": o.init.mean_error, "mean_error": o.refined.mean_error,
                 "sym_mean_error": o.refined.sym_mean_error,
                 "auc_init": o.init.auc, "auc": o.refined.auc, "orientation": o.r.orientation,
+                "learned": o.learned.as_ref().map(|(r, rep)| json!({
+                    "mean_error": rep.mean_error, "sym_mean_error": rep.sym_mean_error,
+                    "auc": rep.auc, "seconds": r.times.total,
+                    "refine": r.refine.as_ref().map(|x| x.method.clone()),
+                })),
             })
         };
         let (iso, noniso) = (&outcomes[0], &outcomes[1]);
@@ -135,6 +143,18 @@ pub(crate) fn run(out_dir: &Path, subdivisions: u32, as_json: bool) -> Result<()
             r.refined.auc,
             r.r.orientation
         );
+        if let Some((lr, rep)) = &r.learned {
+            let sym = rep.sym_mean_error.map_or(String::new(), |s| {
+                format!(" (symmetry-aware {:.2})", 100.0 * s)
+            });
+            outln!(
+                o,
+                "  learned features (--features learned, {:.2} s): mean error x100 {:.2}{sym}, AUC {:.3}",
+                lr.times.total,
+                100.0 * rep.mean_error,
+                rep.auc
+            );
+        }
     }
     outln!(o, "total {total:.2} s; pictures in {}:", out_dir.display());
     for p in &written {
@@ -162,9 +182,20 @@ fn cases(subdivisions: u32) -> Result<Vec<Case>, Failure> {
         .collect()
 }
 
-fn run_case(case: &Case, params: &MatchParams) -> Result<Outcome, Failure> {
+fn run_case(case: &Case, params: &MatchParams, learned: bool) -> Result<Outcome, Failure> {
     let t = Instant::now();
+    let learned_params = if learned {
+        let l = fmaps::pipeline::LearnedFeatures::shipped().map_err(runtime)?;
+        Some(MatchParams::learned(case.a.n_vertices(), case.b.n_vertices(), l).map_err(runtime)?)
+    } else {
+        None
+    };
     let mut single = params.clone();
+    if let Some(l) = &learned_params {
+        // One preparation serves both pipelines.
+        single.features = l.features.clone();
+        single.k_process = single.k_process.max(l.k_process);
+    }
     single.spectrum.threads = 1;
     let (pa, pb) = rayon::join(|| prepare(&case.a, &single), || prepare(&case.b, &single));
     let (pa, pb) = (pa.map_err(runtime)?, pb.map_err(runtime)?);
@@ -177,12 +208,22 @@ fn run_case(case: &Case, params: &MatchParams) -> Result<Outcome, Failure> {
         evaluate(&case.b, &solver, t_ab, &case.truth, None, &ep).map_err(runtime)
     };
     let (init, refined) = (eval(&r.t_ab_init)?, eval(&r.t_ab)?);
+    let eval_seconds = t.elapsed().as_secs_f64();
+    let learned = match &learned_params {
+        Some(p) => {
+            let l = match_prepared(&pa, &pb, p).map_err(runtime)?;
+            let rep = eval(&l.t_ab)?;
+            Some((l, rep))
+        }
+        None => None,
+    };
     Ok(Outcome {
         r,
         init,
         refined,
         spectra,
-        eval_seconds: t.elapsed().as_secs_f64(),
+        eval_seconds,
+        learned,
     })
 }
 
@@ -207,6 +248,10 @@ fn pictures(
     let (img_init, _, _) =
         fmaps::pictures::color_transfer(a, b, &r.t_ab_init, &view).map_err(runtime)?;
     save(img_init, "color-transfer-init.png")?;
+    if let Some((l, _)) = &o.learned {
+        let (img, _, _) = fmaps::pictures::color_transfer(a, b, &l.t_ab, &view).map_err(runtime)?;
+        save(img, "learned-color-transfer.png")?;
+    }
     let (img, _, _) =
         fmaps::pictures::texture_transfer(a, b, &r.t_ab, 12, &view).map_err(runtime)?;
     save(img, "texture-transfer.png")?;
@@ -228,7 +273,7 @@ fn pictures(
         ),
         "fmap.png",
     )?;
-    let series = vec![
+    let mut series = vec![
         plot::Series {
             label: format!("initial map ({:.2})", 100.0 * o.init.mean_error),
             x: o.init.thresholds.clone(),
@@ -240,6 +285,13 @@ fn pictures(
             y: o.refined.curve.clone(),
         },
     ];
+    if let Some((_, rep)) = &o.learned {
+        series.push(plot::Series {
+            label: format!("learned features ({:.2})", 100.0 * rep.mean_error),
+            x: rep.thresholds.clone(),
+            y: rep.curve.clone(),
+        });
+    }
     save(
         plot::cumulative_curves(
             &format!("{}: cumulative geodesic error", case.title),

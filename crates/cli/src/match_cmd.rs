@@ -95,7 +95,9 @@ pub(crate) struct MatchArgs {
     /// Smooth Shells runs both settings, the default's and
     /// --non-isometric's, and keeps the map that distorts area least
     /// (twice the time; better than either alone between different
-    /// builds or species: docs/benchmarks.md, section Confidence).
+    /// builds or species: docs/benchmarks.md, section Confidence). With
+    /// learned features: the default descriptor pipeline (so) runs too,
+    /// and the least distorting of its map and the learned one is kept.
     #[arg(long)]
     second_opinion: bool,
     /// Where the per-vertex features come from: `descriptors` (spectral
@@ -383,6 +385,11 @@ pub(crate) fn params_of(args: &MatchArgs, sizes: (usize, usize)) -> Result<Match
         Some(k) => k.max(params.refinement.k_needed()),
         None => params.k_process_needed(),
     };
+    if args.second_opinion && matches!(params.features, fmaps::pipeline::Features::Learned(_)) {
+        params = params
+            .with_axiomatic_opinion(sizes.0, sizes.1)
+            .map_err(zoomout_failure)?;
+    }
     Ok(params)
 }
 
@@ -496,6 +503,7 @@ pub(crate) fn match_cmd(args: &MatchArgs) -> Result<(), Failure> {
             })),
             "refine_samples": {"per_shape": samples, "automatic": auto_samples},
             "orientation": r.orientation,
+            "passed_over": r.passed_over,
             "confidence": r.confidence.map(|c| json!({
                 "metric_distortion": c.distortion, "long_range": c.long_range,
                 "area_distortion": c.area_distortion, "likely_wrong": c.likely_wrong,
@@ -589,6 +597,15 @@ pub(crate) fn match_cmd(args: &MatchArgs) -> Result<(), Failure> {
         quality.area_distortion,
         quality.conformal_distortion
     );
+    if let Some(p) = &r.passed_over {
+        outln!(
+            o,
+            "second opinion: kept this map over the {} pipeline's ({}, area distortion {:.3})",
+            p.features,
+            p.refiner.as_deref().unwrap_or("no refinement"),
+            p.area_distortion
+        );
+    }
     if let Some(c) = r.confidence {
         outln!(
             o,

@@ -447,12 +447,19 @@ fn demo_matches_the_builtin_pair_and_writes_pictures() {
         noniso["mean_error"].as_f64().unwrap(),
     );
     assert!(init > 0.25 && fin < 0.12, "{init} -> {fin}");
+    // The learned pipeline beside the default on the bodies only: a map
+    // with an exact error (a mean geodesic error is below the diameter,
+    // under 2 x sqrt(area) on these bodies).
+    assert!(v["pairs"][0]["learned"].is_null());
+    let learned = noniso["learned"]["mean_error"].as_f64().unwrap();
+    assert!(learned > 0.0 && learned < 2.0, "{learned}");
     for name in [
         "color-transfer.png",
         "error.png",
         "fmap.png",
         "curves.png",
         "noniso-color-transfer.png",
+        "noniso-learned-color-transfer.png",
         "noniso-error.png",
     ] {
         let bytes = std::fs::read(dir.join(name)).unwrap();

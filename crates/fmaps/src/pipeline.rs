@@ -67,7 +67,7 @@ pub use refinement::{
 };
 use refining::draw_samples;
 pub use refining::refine_result;
-pub use result::{MatchResult, MatchTimes, Start};
+pub use result::{MatchResult, MatchTimes, PassedOver, Start};
 use single::match_described;
 use starts::multi_start;
 
@@ -127,7 +127,32 @@ pub fn match_prepared(
     let confidence = Confidence::of_map(&out.t_ab, a, b)?;
     out.times.total += confidence.seconds;
     out.confidence = Some(confidence);
-    Ok(out)
+    let Some(other) = &params.second_opinion else {
+        return Ok(out);
+    };
+    let mut second = match_prepared(a, b, other)?;
+    let area = |r: &MatchResult| r.confidence.map_or(f64::INFINITY, |c| c.area_distortion);
+    let seconds = out.times.total + second.times.total;
+    let features = |p: &MatchParams| match p.features {
+        Features::Learned(_) => "learned",
+        _ => "descriptors",
+    };
+    let passed = |r: &MatchResult, p: &MatchParams| PassedOver {
+        features: features(p),
+        refiner: r.refine.as_ref().map(|x| x.method.clone()),
+        area_distortion: area(r),
+        orientation: r.orientation,
+    };
+    // Ties keep this pipeline's map.
+    let mut kept = if area(&second) < area(&out) {
+        second.passed_over = Some(passed(&out, params));
+        second
+    } else {
+        out.passed_over = Some(passed(&second, other));
+        out
+    };
+    kept.times.total = seconds;
+    Ok(kept)
 }
 
 /// [`match_prepared`] without the confidence.

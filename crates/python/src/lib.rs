@@ -552,6 +552,11 @@ fn match_shapes(
         Some(kp) => kp.max(params.refinement.k_needed()),
         None => params.k_process_needed(),
     };
+    if second_opinion && learned_features(&params) {
+        params = params
+            .with_axiomatic_opinion(sizes.0, sizes.1)
+            .map_err(err)?;
+    }
     params.descriptors.landmarks = landmarks;
     let (r, quality) = run(py, threads, move || {
         let r = fmaps::match_shapes(&ma, &mb, &params).map_err(|e| e.to_string())?;
@@ -560,6 +565,12 @@ fn match_shapes(
     })?
     .map_err(err)?;
     result(py, r, quality, (a.clone().unbind(), b.clone().unbind()))
+}
+
+/// Whether `params` match with learned features (then `second_opinion`
+/// runs the descriptor pipeline beside them).
+fn learned_features(params: &MatchParams) -> bool {
+    matches!(params.features, fmaps::pipeline::Features::Learned(_))
 }
 
 /// The refiner's name and the seconds of each of its steps ("" and none
@@ -626,6 +637,14 @@ fn result(
         )?;
         confidence.set_item("warn_above", warn)?;
         confidence.set_item("advice", c.advice())?;
+    }
+    if let Some(p) = &r.passed_over {
+        let d = PyDict::new(py);
+        d.set_item("features", p.features)?;
+        d.set_item("refiner", p.refiner.clone())?;
+        d.set_item("area_distortion", p.area_distortion)?;
+        d.set_item("orientation", p.orientation)?;
+        confidence.set_item("passed_over", d)?;
     }
     Ok(MatchResult {
         map_ab: indices(py, &r.t_ab),
@@ -908,6 +927,11 @@ fn match_prepared(
         &mut params,
         learned.map(|l| if non_isometric { l.non_isometric() } else { l }),
     );
+    if second_opinion && learned_features(&params) {
+        params = params
+            .with_axiomatic_opinion(sizes.0, sizes.1)
+            .map_err(err)?;
+    }
     params.descriptors.landmarks = landmarks;
     let (r, quality) = run(py, threads, move || {
         let r = fmaps::pipeline::match_prepared(&pa, &pb, &params).map_err(|e| e.to_string())?;

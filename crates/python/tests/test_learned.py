@@ -25,6 +25,22 @@ def test_learned_features_give_the_cli_map(tmp_path):
     assert np.array_equal(r.map_ab, fmaps.read_indices(out))
 
 
+def test_learned_second_opinion_gives_the_cli_map(tmp_path):
+    a, b = faust("tr_reg_080"), faust("tr_reg_091")
+    out = tmp_path / "ab.map"
+    subprocess.run(
+        [cli(), "--threads", "2", "match", str(a), str(b), "--features", "learned", "--second-opinion"]
+        + ["--out", str(out)],
+        check=True,
+        capture_output=True,
+    )
+    r = fmaps.match_shapes(fmaps.Mesh.load(a), fmaps.Mesh.load(b), features="learned", second_opinion=True, threads=2)
+    assert np.array_equal(r.map_ab, fmaps.read_indices(out))
+    passed = r.confidence["passed_over"]
+    assert passed["features"] in ("learned", "descriptors")
+    assert passed["area_distortion"] >= r.confidence["area_distortion"]
+
+
 # A small network and a short run.
 SMALL = dict(
     steps=4, width=8, blocks=1, outputs=24, inputs=8, eigenpairs=24, fmap_k=16, coupling_samples=200, threads=1

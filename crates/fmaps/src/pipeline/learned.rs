@@ -171,6 +171,7 @@ pub(super) fn match_learned(
         energy: 0.0,
         times,
         confidence: None,
+        passed_over: None,
     };
     refine_and_orient(&mut out, a, b, params)?;
     Ok(out)
@@ -284,6 +285,45 @@ mod tests {
         let stale = crate::pipeline::match_prepared(&a, &b, &first).unwrap();
         assert_eq!(r.t_ab, direct.t_ab);
         assert_ne!(r.t_ab, stale.t_ab, "two models, two maps");
+    }
+
+    /// A second opinion keeps the less area-distorting of the two
+    /// pipelines' maps, each the map its pipeline gives alone, and says
+    /// which it passed over.
+    #[test]
+    fn a_second_opinion_keeps_the_less_distorting_map() {
+        let pair = fmaps_shapes::creature_pair(3);
+        let learned = learned_params(small_model(), LearnedPointMap::Features);
+        let (na, nb) = (pair.source.n_vertices(), pair.target.n_vertices());
+        let both = learned.clone().with_axiomatic_opinion(na, nb).unwrap();
+        let other = both.second_opinion.as_deref().unwrap().clone();
+        assert_eq!(other.k_process, both.k_process);
+        assert!(matches!(other.features, Features::Descriptors));
+        let a = crate::pipeline::prepare(&pair.source, &both).unwrap();
+        let b = crate::pipeline::prepare(&pair.target, &both).unwrap();
+        let r = crate::pipeline::match_prepared(&a, &b, &both).unwrap();
+        let alone = MatchParams {
+            k_process: both.k_process,
+            ..learned
+        };
+        let l = crate::pipeline::match_prepared(&a, &b, &alone).unwrap();
+        let d = crate::pipeline::match_prepared(&a, &b, &other).unwrap();
+        let area = |r: &MatchResult| r.confidence.unwrap().area_distortion;
+        let (kept, passed, name) = if area(&d) < area(&l) {
+            (&d, &l, "learned")
+        } else {
+            (&l, &d, "descriptors")
+        };
+        assert_eq!(r.t_ab, kept.t_ab);
+        let p = r.passed_over.as_ref().unwrap();
+        assert_eq!(p.features, name);
+        assert_eq!(p.area_distortion, area(passed));
+        assert!(area(&r) <= p.area_distortion);
+        // Both run on the same prepared shapes.
+        let mut bad = both.clone();
+        bad.second_opinion.as_mut().unwrap().k_process -= 1;
+        let e = crate::pipeline::match_prepared(&a, &b, &bad).unwrap_err();
+        assert!(e.to_string().contains("second opinion"), "{e}");
     }
 
     #[test]

@@ -61,6 +61,13 @@ pub struct MatchParams {
     pub refinement: Refinement,
     /// Multi-start: further initial sizes and how one final map is kept.
     pub starts: Starts,
+    /// A second pipeline run on the same pair (the descriptor pipeline
+    /// beside learned features: [`MatchParams::with_axiomatic_opinion`]);
+    /// the map of least area distortion of the two is kept
+    /// ([`MatchResult::passed_over`](super::MatchResult::passed_over) says
+    /// which). The shapes must be prepared for both (`k_process` and
+    /// features: prepare with `self`, whose `k_process` covers both).
+    pub second_opinion: Option<Box<MatchParams>>,
 }
 
 /// The features a map is computed from.
@@ -173,6 +180,7 @@ impl Default for MatchParams {
             adjoint: false,
             refinement: Refinement::recommended(),
             starts: Starts::default(),
+            second_opinion: None,
         };
         p.k_process = p.k_process_needed();
         p
@@ -201,6 +209,55 @@ impl MatchParams {
             p.k_process = p.k_process_needed();
         }
         p
+    }
+
+    /// What `fmaps match --features learned` runs on meshes of `n_a` and
+    /// `n_b` vertices: `learned`'s point map pulled back at size
+    /// [`LearnedFeatures::DEFAULT_K`] and refined by ZoomOut on
+    /// [`LearnedFeatures::default_schedule`] (no refinement on meshes too
+    /// small for one, as [`MatchParams::for_meshes`]); one start.
+    pub fn learned(
+        n_a: usize,
+        n_b: usize,
+        learned: LearnedFeatures,
+    ) -> Result<MatchParams, MatchError> {
+        let mut p = MatchParams::for_meshes(n_a, n_b);
+        if RefinerKind::default_for(n_a.min(n_b)) != RefinerKind::None {
+            p.k = LearnedFeatures::DEFAULT_K;
+            let options = RefineOptions {
+                schedule: Some(LearnedFeatures::default_schedule(p.k)),
+                ..RefineOptions::for_map_size(p.k)
+            };
+            p.set_refinement(RefinerKind::Zoomout, &options)?;
+        }
+        p.starts.sizes.clear();
+        p.features = Features::Learned(learned);
+        p.k_process = p.k_process.max(p.k_process_needed());
+        Ok(p)
+    }
+
+    /// With the default descriptor pipeline on meshes of `n_a` and `n_b`
+    /// vertices as a second opinion (Smooth Shells, itself with both its
+    /// settings: [`RefineOptions::second_opinion`]): the map of least area
+    /// distortion of this pipeline's and that one's is kept. `k_process`
+    /// grows to what both need.
+    pub fn with_axiomatic_opinion(mut self, n_a: usize, n_b: usize) -> Result<Self, MatchError> {
+        let mut other = MatchParams::for_meshes(n_a, n_b);
+        let kind = RefinerKind::default_for(n_a.min(n_b));
+        if kind != RefinerKind::None {
+            let options = RefineOptions {
+                second_opinion: true,
+                ..RefineOptions::for_map_size(other.k)
+            };
+            other.set_refinement(kind, &options)?;
+        }
+        other.k_process = other.k_process.max(other.k_process_needed());
+        self.k_process = self.k_process.max(other.k_process);
+        other.k_process = self.k_process;
+        other.spectrum = self.spectrum.clone();
+        other.area_normalize = self.area_normalize;
+        self.second_opinion = Some(Box::new(other));
+        Ok(self)
     }
 
     /// Sets the refinement `kind` built from `options`
@@ -257,6 +314,15 @@ impl MatchParams {
 
     pub(super) fn check(&self) -> Result<(), MatchError> {
         let bad = |m: String| Err(MatchError::InvalidParameter(m));
+        if let Some(other) = &self.second_opinion {
+            if other.k_process != self.k_process || other.area_normalize != self.area_normalize {
+                return bad(format!(
+                    "the second opinion's k_process ({}) and area normalisation ({}) must be this pipeline's ({}, {}): both run on the same prepared shapes",
+                    other.k_process, other.area_normalize, self.k_process, self.area_normalize
+                ));
+            }
+            other.check()?;
+        }
         let d = &self.descriptors;
         if self.k == 0 || self.k > self.k_process {
             return bad(format!(

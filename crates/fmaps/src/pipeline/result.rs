@@ -57,6 +57,24 @@ pub struct MatchResult {
     /// [`match_prepared`](super::match_prepared) and the functions built on
     /// it; `None` from a bare refinement).
     pub confidence: Option<super::Confidence>,
+    /// With a second opinion ([`MatchParams::second_opinion`](super::MatchParams::second_opinion)):
+    /// the map that was not kept.
+    pub passed_over: Option<PassedOver>,
+}
+
+/// The map a second opinion did not keep: which pipeline made it and its
+/// area distortion (above the kept map's).
+#[derive(Debug, Clone, PartialEq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize))]
+pub struct PassedOver {
+    /// `learned` or `descriptors`.
+    pub features: &'static str,
+    /// Its refiner's name (`None`: no refinement).
+    pub refiner: Option<String>,
+    /// Its area distortion.
+    pub area_distortion: f64,
+    /// Its orientation score ([`MatchResult::orientation`]).
+    pub orientation: f64,
 }
 
 /// One start of a multi-start run.

@@ -68,6 +68,7 @@ pub(super) fn match_described_deferred(
         energy: energy_value,
         times,
         confidence: None,
+        passed_over: None,
     };
     refine_and_orient(&mut out, a, b, params)?;
     Ok((out, c_init))

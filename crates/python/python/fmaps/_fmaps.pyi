@@ -136,7 +136,7 @@ def match_shapes(
     w_descr, w_lap, w_dcomm, w_orient: relative weights of the energy's terms (only ratios matter); starts: further initial sizes ([] = one start; None = the CLI's default);
     k_process: eigenpairs computed (None: those the pipeline uses, as the CLI: 200 for Smooth Shells, 150 for ZoomOut);
     non_isometric: the shapes are not near-isometric (different people or animals), as `fmaps match --non-isometric`.
-    second_opinion: Smooth Shells runs both settings (default and non-isometric) and keeps the map of least area distortion, as `fmaps match --second-opinion` (twice the time).
+    second_opinion: Smooth Shells runs both settings (default and non-isometric) and keeps the map of least area distortion, as `fmaps match --second-opinion` (twice the time); with features="learned", the default descriptor pipeline runs beside the learned one and the least area-distorting map is kept (confidence["passed_over"] says which was not).
     As the CLI, a ZoomOut runs its iterations on 5000 farthest points per shape when a mesh has more than 20000
     vertices (then one iteration and the final map on every vertex; the result's refiner name says so)."""
 
