@@ -94,7 +94,7 @@ fn sample(s: &CouplingShape<'_>) -> Sampled {
 
 /// Column softmax of `z / tau` (each column a distribution; columns are
 /// contiguous in nalgebra's storage).
-fn softmax_columns(z: &DMatrix<f64>, tau: f64) -> DMatrix<f64> {
+pub(crate) fn softmax_columns(z: &DMatrix<f64>, tau: f64) -> DMatrix<f64> {
     let mut p = z.clone();
     let rows = p.nrows();
     for col in p.as_mut_slice().chunks_exact_mut(rows) {
@@ -110,7 +110,11 @@ fn softmax_columns(z: &DMatrix<f64>, tau: f64) -> DMatrix<f64> {
 }
 
 /// `d z` of `p = softmax_columns(z / tau)` given `dp`.
-fn softmax_columns_backward(p: &DMatrix<f64>, dp: &DMatrix<f64>, tau: f64) -> DMatrix<f64> {
+pub(crate) fn softmax_columns_backward(
+    p: &DMatrix<f64>,
+    dp: &DMatrix<f64>,
+    tau: f64,
+) -> DMatrix<f64> {
     let mut dz = p.component_mul(dp);
     let rows = p.nrows();
     for (o, (pc, dc)) in dz.as_mut_slice().chunks_exact_mut(rows).zip(

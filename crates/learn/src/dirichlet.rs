@@ -29,6 +29,7 @@
 use nalgebra::DMatrix;
 use sprs::CsMat;
 
+use crate::coupling::{softmax_columns, softmax_columns_backward};
 use crate::gemm::Op::{N, T};
 use crate::gemm::mul;
 
@@ -91,20 +92,6 @@ fn add_unnormalized(
     }
 }
 
-/// Column softmax of `z / tau`.
-fn softmax_columns(z: &mut DMatrix<f64>, tau: f64) {
-    let rows = z.nrows();
-    for col in z.as_mut_slice().chunks_exact_mut(rows) {
-        let max = col.iter().fold(f64::NEG_INFINITY, |m, &v| m.max(v));
-        let mut sum = 0.0;
-        for v in col.iter_mut() {
-            *v = ((*v - max) / tau).exp();
-            sum += *v;
-        }
-        col.iter_mut().for_each(|v| *v /= sum);
-    }
-}
-
 /// One direction: the energy on `s` of the soft map from `s` to `t`;
 /// adds the gradients to `ds` and `dt`.
 fn one_side(
@@ -159,8 +146,7 @@ fn one_side(
     let (gt, norms_t) = normalized_rows(t.features, targets);
     // q = P_stᵀ (targets x rows): each column a distribution over the
     // targets.
-    let mut q = mul(&gt, N, &gs, T);
-    softmax_columns(&mut q, tau);
+    let q = softmax_columns(&mul(&gt, N, &gs, T), tau);
     let d = t.positions.ncols();
     let vt = DMatrix::from_fn(targets.len(), d, |r, c| t.positions[(targets[r], c)]);
     // A = P V_t (rows x d).
@@ -180,18 +166,7 @@ fn one_side(
     // dq = V_t dAᵀ, then through the column softmax: dz (targets x rows)
     // is d (G_t G_sᵀ).
     let dq = mul(&vt, N, &da, T);
-    let mut dz = q.component_mul(&dq);
-    let m = q.nrows();
-    for (o, (pc, dc)) in dz.as_mut_slice().chunks_exact_mut(m).zip(
-        q.as_slice()
-            .chunks_exact(m)
-            .zip(dq.as_slice().chunks_exact(m)),
-    ) {
-        let dot: f64 = pc.iter().zip(dc).map(|(a, b)| a * b).sum();
-        for (v, pv) in o.iter_mut().zip(pc) {
-            *v = (*v - pv * dot) / tau;
-        }
-    }
+    let dz = softmax_columns_backward(&q, &dq, tau);
     let dgt = mul(&dz, N, &gs, N);
     let dgs = mul(&dz, T, &gt, N);
     add_unnormalized(ds, &rows, &gs, &norms_s, &dgs);
@@ -377,9 +352,7 @@ mod tests {
         let transported = |a: &DMatrix<f64>, b: &DMatrix<f64>| {
             let (ga, _) = normalized_rows(a, &(0..n).collect::<Vec<_>>());
             let (gb, _) = normalized_rows(b, &(0..n).collect::<Vec<_>>());
-            let mut q = mul(&gb, N, &ga, T);
-            softmax_columns(&mut q, tau);
-            q.transpose() * &pos
+            softmax_columns(&mul(&gb, N, &ga, T), tau).transpose() * &pos
         };
         let dense = DMatrix::from_fn(n, n, |i, j| *l.get(i, j).unwrap_or(&0.0));
         let form = |a: DMatrix<f64>| (a.transpose() * &dense * &a).trace() / 3.0;
