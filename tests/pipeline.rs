@@ -482,3 +482,52 @@ fn sampled_zoomout_maps_are_exact_conversions() {
             .unwrap();
     assert_eq!(r.t_ab, exact);
 }
+
+/// Smooth Shells takes its rigid alignment from the user's landmarks: an
+/// ellipsoid and its copy turned half a turn about its short axis (a
+/// symmetry: both maps, the identity and the turn, fit equally well) is
+/// matched by whichever the landmarks say, on nearly every vertex.
+#[test]
+fn smooth_shells_follows_the_landmarks() {
+    let (v, f) = icosphere(1.0, 3).into_parts();
+    let v: Vec<[f64; 3]> = v.iter().map(|p| [1.6 * p[0], p[1], 0.6 * p[2]]).collect();
+    let a = TriMesh::new(v.clone(), f.clone()).unwrap();
+    // B: A turned by π about z, same vertex order (the truth "i -> i").
+    let turned: Vec<[f64; 3]> = v.iter().map(|p| [-p[0], -p[1], p[2]]).collect();
+    let b = TriMesh::new(turned.clone(), f).unwrap();
+    // The other map: i -> the vertex of B at A's position of i.
+    let partner: Vec<usize> = v
+        .iter()
+        .map(|p| {
+            (0..turned.len())
+                .min_by(|&x, &y| {
+                    let d = |q: [f64; 3]| (0..3).map(|c| (q[c] - p[c]).powi(2)).sum::<f64>();
+                    d(turned[x]).total_cmp(&d(turned[y]))
+                })
+                .unwrap()
+        })
+        .collect();
+    let close = |t: &[usize], expected: &dyn Fn(usize) -> usize| {
+        let ok = (0..t.len())
+            .filter(|&i| {
+                let (p, q) = (turned[t[i]], turned[expected(i)]);
+                (0..3).map(|c| (p[c] - q[c]).powi(2)).sum::<f64>().sqrt() < 0.2
+            })
+            .count();
+        ok as f64 / t.len() as f64
+    };
+    let mut params = MatchParams::default();
+    params.starts.sizes.clear();
+    let picks = [0, 100, 321, 500, 640];
+    params.descriptors.landmarks = picks.iter().map(|&i| (i, i)).collect();
+    let r = match_shapes(&a, &b, &params).unwrap();
+    let share = close(&r.t_ab, &|i| i);
+    assert!(share > 0.95, "landmarks i -> i: {share} of the vertices");
+    params.descriptors.landmarks = picks.iter().map(|&i| (i, partner[i])).collect();
+    let r = match_shapes(&a, &b, &params).unwrap();
+    let share = close(&r.t_ab, &|i| partner[i]);
+    assert!(
+        share > 0.95,
+        "landmarks i -> partner: {share} of the vertices"
+    );
+}

@@ -38,7 +38,10 @@ pub(crate) struct MatchArgs {
     #[arg(long, default_value_t = defaults().descriptors.n)]
     n_descr: usize,
     /// Landmark file: one pair `a b` of 1-based vertex indices (source,
-    /// target) per line, or one index used on both shapes.
+    /// target) per line, or one index used on both shapes. They enter the
+    /// descriptors, and with three or more Smooth Shells takes its rigid
+    /// alignment from them (no orientation search): the way out of a map
+    /// aligned the wrong way round.
     #[arg(long)]
     landmarks: Option<PathBuf>,
     #[command(flatten)]

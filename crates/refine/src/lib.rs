@@ -265,6 +265,11 @@ pub struct RefineInput<'a> {
     /// it faster: the result is the same for any guess. A guess of the
     /// wrong length is ignored.
     pub t_ba_guess: Option<&'a [usize]>,
+    /// Corresponding vertices the user knows, `(vertex of A, vertex of
+    /// B)`: refiners that align the shapes in space ([`SmoothShells`])
+    /// take their rigid alignment from them (at least three); the others
+    /// ignore them.
+    pub landmarks: &'a [(usize, usize)],
 }
 
 impl<'a> RefineInput<'a> {
@@ -280,6 +285,7 @@ impl<'a> RefineInput<'a> {
             basis_b,
             geometry: None,
             t_ba_guess: None,
+            landmarks: &[],
         }
     }
 
@@ -289,6 +295,11 @@ impl<'a> RefineInput<'a> {
             geometry: Some((a, b)),
             ..self
         }
+    }
+
+    /// With landmark pairs `(vertex of A, vertex of B)`.
+    pub fn with_landmarks(self, landmarks: &'a [(usize, usize)]) -> Self {
+        RefineInput { landmarks, ..self }
     }
 
     /// With a guess of the point map B → A.

@@ -38,6 +38,13 @@
 //! Proposals and orientations run in parallel. `reflect` aligns A's
 //! mirror image instead (for a B that is a mirror image of A).
 //!
+//! **Landmarks**: with at least three landmark pairs
+//! ([`crate::RefineInput::landmarks`]) the rigid alignment is the proper
+//! rotation that best takes A's landmarks onto B's (Kabsch), and no
+//! orientation is searched: the user's correspondence decides which way
+//! round the shapes go, where the surrogate and the orientation screen
+//! can only guess (symmetric bodies, different species).
+//!
 //! Between shapes that are not near-isometric (different builds) the
 //! surrogate's two best orientations often miss the right one;
 //! [`SmoothShells::non_isometric`] screens all eight by a short alignment
@@ -76,6 +83,20 @@ const K_MIN: usize = 6;
 struct Main<'a> {
     samples: (&'a Samples<'a>, &'a Samples<'a>),
     gram: &'a DMatrix<f64>,
+}
+
+/// The landmark pairs, checked against the shapes' sizes.
+fn input_landmarks(
+    landmarks: &[(usize, usize)],
+    na: usize,
+    nb: usize,
+) -> Result<&[(usize, usize)]> {
+    if let Some(&(i, j)) = landmarks.iter().find(|&&(i, j)| i >= na || j >= nb) {
+        return Err(Error::InvalidParameter(format!(
+            "Smooth Shells: landmark ({i}, {j}) is outside the shapes ({na} and {nb} vertices)"
+        )));
+    }
+    Ok(landmarks)
 }
 
 /// A proposal's result as the start of an alignment: its τ, and its
@@ -650,6 +671,7 @@ impl Refiner for SmoothShells {
         let t0 = Instant::now();
         self.check(basis_a, basis_b)?;
         crate::check_geometry(basis_a, basis_b, &geo_a, &geo_b)?;
+        let landmarks = input_landmarks(input.landmarks, basis_a.n(), basis_b.n())?;
         let mut report = RefineReport::start(self.name());
         let kt = self.k_max + 9;
         // The first kt eigenvectors (borrowed when that is all of them:
@@ -691,7 +713,12 @@ impl Refiner for SmoothShells {
             }
         };
         let t = Instant::now();
-        let rotations = if self.rigid {
+        let rotations = if self.rigid && landmarks.len() >= 3 {
+            // The user's landmarks fix the orientation: no search.
+            let p: Vec<[f64; 3]> = landmarks.iter().map(|&(i, _)| x.verts[i]).collect();
+            let q: Vec<[f64; 3]> = landmarks.iter().map(|&(_, j)| y.verts[j]).collect();
+            vec![rigid::kabsch(&p, &q)]
+        } else if self.rigid {
             self.rigid_alignment(&x, &y, &ix, &iy, &input, &mut report)?
         } else {
             vec![Matrix3::identity()]

@@ -38,7 +38,21 @@ pub fn refine_result(
     b: &PreparedShape,
     refiner: &dyn Refiner,
 ) -> Result<(), MatchError> {
+    refine_with_landmarks(out, a, b, refiner, &[])
+}
+
+/// [`refine_result`] with landmark pairs `(vertex of A, vertex of B)` for
+/// refiners that use them ([`refine::RefineInput::landmarks`]).
+pub(super) fn refine_with_landmarks(
+    out: &mut MatchResult,
+    a: &PreparedShape,
+    b: &PreparedShape,
+    refiner: &dyn Refiner,
+    landmarks: &[(usize, usize)],
+) -> Result<(), MatchError> {
     let t = Instant::now();
+    // The refiner's A is our B.
+    let swapped: Vec<(usize, usize)> = landmarks.iter().map(|&(x, y)| (y, x)).collect();
     // A point map A -> B pulls functions back from B to A, so T_AB goes
     // with C_BA: the refiner's (c_ab, basis_a, basis_b) -> t_ba contract
     // is applied to the pair (B, A), and its t_ba is our T_AB.
@@ -47,7 +61,8 @@ pub fn refine_result(
     let refined = refiner.refine(
         &refine::RefineInput::new(&out.c_ba, &b.basis, &a.basis)
             .with_geometry(b.geometry(), a.geometry())
-            .with_guess(&out.t_ab),
+            .with_guess(&out.t_ab)
+            .with_landmarks(&swapped),
     )?;
     out.c_ba = refined.c_ab;
     out.t_ab = refined.t_ba;
@@ -66,7 +81,7 @@ pub(super) fn refine_and_orient(
     params: &MatchParams,
 ) -> Result<(), MatchError> {
     if let Some(r) = with_refiner(&params.refinement, params.adjoint, a, b, |r| {
-        refine_result(out, a, b, r)
+        refine_with_landmarks(out, a, b, r, &params.descriptors.landmarks)
     }) {
         r?;
     }

@@ -15,7 +15,7 @@ use super::fit::Described;
 use super::params::MatchParams;
 use super::prepare::PreparedShape;
 use super::refinement::Refinement;
-use super::refining::{initial_map, orientation_of, refine_result, with_refiner};
+use super::refining::{initial_map, orientation_of, refine_with_landmarks, with_refiner};
 use super::result::{MatchResult, MatchTimes, Start};
 use super::single::match_described_deferred;
 use crate::refine::starts::{StartScores, best_start, first_start_suffices, start_sizes};
@@ -127,7 +127,7 @@ pub(super) fn multi_start(
         let first = out.refine.take();
         let before = out.times.refine;
         if let Some(r) = with_refiner(&rest, params.adjoint, a, b, |r| {
-            refine_result(&mut out, a, b, r)
+            refine_with_landmarks(&mut out, a, b, r, &params.descriptors.landmarks)
         }) {
             r?;
         }

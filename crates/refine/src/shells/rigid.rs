@@ -33,6 +33,20 @@ pub(super) fn align_vectors(a: &Vector3<f64>, b: &Vector3<f64>) -> Matrix3<f64> 
     axis_rotation(&v.normalize(), v.norm().atan2(c))
 }
 
+/// The proper rotation `R` (about the origin, where both shapes are
+/// centred) minimising `Σ ‖R p_i − q_i‖²` (Kabsch: the SVD of `Σ q_i p_iᵀ`,
+/// its last singular direction's sign chosen so that `det R = 1`).
+pub(super) fn kabsch(p: &[[f64; 3]], q: &[[f64; 3]]) -> Matrix3<f64> {
+    let mut h = Matrix3::zeros();
+    for (a, b) in p.iter().zip(q) {
+        h += Vector3::new(b[0], b[1], b[2]) * Vector3::new(a[0], a[1], a[2]).transpose();
+    }
+    let svd = h.svd(true, true);
+    let (u, vt) = (svd.u.unwrap(), svd.v_t.unwrap());
+    let d = (u * vt).determinant().signum();
+    u * Matrix3::from_diagonal(&Vector3::new(1.0, 1.0, d)) * vt
+}
+
 /// ICP of `x` about the main axis `axis` (through the origin, where both
 /// shapes are centred): `iterations` rounds of both directions' nearest
 /// points and the closed-form best angle. Rotates `x`; returns the
@@ -84,6 +98,29 @@ pub(super) fn axis_icp(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn kabsch_recovers_a_rotation() {
+        let r = axis_rotation(&Vector3::new(1.0, 2.0, -0.5).normalize(), 2.2);
+        let p = [
+            [1.0, 0.2, 0.0],
+            [0.0, 1.0, 0.3],
+            [-0.4, 0.1, 1.0],
+            [0.5, -0.7, 0.2],
+        ];
+        let q: Vec<[f64; 3]> = p
+            .iter()
+            .map(|v| {
+                let w = r * Vector3::new(v[0], v[1], v[2]);
+                [w[0], w[1], w[2]]
+            })
+            .collect();
+        let k = kabsch(&p, &q);
+        assert!((k - r).norm() < 1e-12, "{k} vs {r}");
+        // Three points of a mirror image: still a proper rotation.
+        let m: Vec<[f64; 3]> = p.iter().map(|v| [-v[0], v[1], v[2]]).collect();
+        assert!((kabsch(&p, &m).determinant() - 1.0).abs() < 1e-12);
+    }
 
     #[test]
     fn rotations_are_proper_and_align() {
