@@ -25,7 +25,8 @@ fn tiny() -> (Model, Recipe) {
     (Model::new(arch, pre, 3), recipe)
 }
 
-fn shapes(model: &Model, recipe: &Recipe) -> Vec<TrainShape> {
+/// A sphere, twice its size, and an ellipsoid: the shapes of [`shapes`].
+fn meshes() -> [TriMesh; 3] {
     let a = fmaps_shapes::icosphere(1.0, 2);
     let b = a.scaled(2.0).unwrap();
     let v: Vec<[f64; 3]> = a
@@ -34,8 +35,13 @@ fn shapes(model: &Model, recipe: &Recipe) -> Vec<TrainShape> {
         .map(|p| [p[0] * 1.3, p[1], p[2] * 0.8])
         .collect();
     let c = TriMesh::new(v, a.faces().to_vec()).unwrap();
-    [("a", &a), ("b", &b), ("c", &c)]
+    [a, b, c]
+}
+
+fn shapes(model: &Model, recipe: &Recipe) -> Vec<TrainShape> {
+    ["a", "b", "c"]
         .iter()
+        .zip(meshes().iter())
         .map(|(n, m)| TrainShape::new(n, m, model, recipe).unwrap())
         .collect()
 }
@@ -82,13 +88,7 @@ fn pair_gradient_check(dirichlet: f64) {
     recipe.dirichlet_centres = Some(40);
     let mut s = shapes(&model, &recipe);
     if dirichlet != 0.0 {
-        let a = fmaps_shapes::icosphere(1.0, 2);
-        let v: Vec<[f64; 3]> = a
-            .vertices()
-            .iter()
-            .map(|p| [p[0] * 1.3, p[1], p[2] * 0.8])
-            .collect();
-        let c = TriMesh::new(v, a.faces().to_vec()).unwrap();
+        let [a, _, c] = meshes();
         s[0] = s[0].clone().with_geometry(&a).unwrap();
         s[2] = s[2].clone().with_geometry(&c).unwrap();
     }
